@@ -1,0 +1,1 @@
+"""spacepose package part."""
