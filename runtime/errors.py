@@ -76,7 +76,8 @@ def check_shape(array: object, shape: Sequence[int | None], name: str, dtypes: S
         want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
         raise ShapeError(f"{name} must have shape {want}, got {tuple(array.shape)}")
     if dtypes is not None and not any(np.issubdtype(array.dtype, d) for d in dtypes):
-        raise ShapeError(f"{name} must have dtype in {[np.dtype(d).name for d in dtypes]}, got {array.dtype}")
+        names = [getattr(d, "__name__", str(d)) for d in dtypes]
+        raise ShapeError(f"{name} must have dtype in {names}, got {array.dtype}")
     return array
 
 

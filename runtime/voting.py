@@ -46,6 +46,14 @@ KERNELS = ("flat", "gaussian")
 _NUMERIC = (np.floating, np.integer)
 
 
+def _check_array(array: object, shape: tuple[int | None, ...], name: str) -> np.ndarray:
+    """``check_shape`` plus a real-number (float or int, not bool/complex) dtype check."""
+    check_shape(array, shape, name)
+    if not any(np.issubdtype(array.dtype, d) for d in _NUMERIC):  # type: ignore[union-attr]
+        raise ShapeError(f"{name} must have a float or integer dtype, got {array.dtype}")  # type: ignore[union-attr]
+    return array  # type: ignore[return-value]
+
+
 @dataclass(frozen=True)
 class MeanShiftResult:
     """Modes found by :func:`mean_shift`.
@@ -147,7 +155,7 @@ def mean_shift(
             finite row, or no seed reaches any point.
         ValueError: ``bandwidth`` <= 0 or non-finite, unknown ``kernel``, bad ``n_seeds``/``max_iter``/``tol``.
     """
-    check_shape(points, (None, None), "points", dtypes=_NUMERIC)
+    _check_array(points, (None, None), "points")
     h = _check_bandwidth(bandwidth)
     if kernel not in KERNELS:
         raise ValueError(f"unknown kernel {kernel!r}; valid kernels: {', '.join(KERNELS)}")
@@ -167,7 +175,7 @@ def mean_shift(
         raise ShapeError(f"points has no finite rows (shape {tuple(points.shape)})")
 
     if seeds is not None:
-        check_shape(seeds, (None, pts.shape[1]), "seeds", dtypes=_NUMERIC)
+        _check_array(seeds, (None, pts.shape[1]), "seeds")
         start = np.asarray(seeds, dtype=np.float64)
         if start.shape[0] == 0 or not np.all(np.isfinite(start)):
             raise ShapeError("seeds must hold at least one row and be finite")
@@ -276,7 +284,7 @@ def centre_first_inliers(
         ShapeError: ``centre_votes`` is not (N, 3) numeric or has no finite row.
         ValueError: bad ``bandwidth`` or other parameters (see :func:`mean_shift`).
     """
-    check_shape(centre_votes, (None, 3), "centre_votes", dtypes=_NUMERIC)
+    _check_array(centre_votes, (None, 3), "centre_votes")
     result = mean_shift(centre_votes, bandwidth, kernel=kernel, n_seeds=n_seeds, seed=seed,
                         max_iter=max_iter, tol=tol)
     centre = result.modes[0]
@@ -312,7 +320,7 @@ def vote_keypoints(
         ShapeError: wrong shapes/dtypes, or ``inliers`` selects no point.
         ValueError: bad ``bandwidth`` or other parameters (see :func:`mean_shift`).
     """
-    check_shape(kp_votes, (None, None, 3), "kp_votes", dtypes=_NUMERIC)
+    _check_array(kp_votes, (None, None, 3), "kp_votes")
     check_shape(inliers, (kp_votes.shape[1],), "inliers", dtypes=(np.bool_,))
     _check_bandwidth(bandwidth)
     if not inliers.any():

@@ -1,0 +1,75 @@
+"""The metadata contract written into every exported stereo graph (and mirrored in bundle.json).
+
+One JSON object stored under the ONNX ``metadata_props`` key ``"spacepose"``; the runtime reads it
+back with :func:`spacepose.onnx_session.session_metadata` and checks it
+(:func:`spacepose.stereo_stage.validate_stereo_metadata`).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import subprocess
+from pathlib import Path
+from typing import Any, Mapping
+
+__all__ = ["SCHEMA_VERSION", "STEREO_NORMALISATION", "stereo_metadata", "git_commit"]
+
+SCHEMA_VERSION = 1
+
+#: what the graph expects: float32 RGB in [0, 255], grey replicated to 3 channels, no mean/std
+STEREO_NORMALISATION = {"range": [0.0, 255.0], "channels": "RGB", "grey": "replicate", "layout": "NCHW",
+                        "uint16": "scale by 255/65535"}
+
+
+def git_commit(cwd: str | Path | None = None) -> str | None:
+    """``git rev-parse HEAD`` of the source tree, or None when git or the repo is unavailable."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd or Path(__file__).resolve().parent,
+                             capture_output=True, text=True, timeout=10, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None
+
+
+def stereo_metadata(
+    *,
+    input_size: tuple[int, int],
+    iters: int,
+    stereo_config: Mapping[str, Any],
+    dataset: Mapping[str, Any] | None = None,
+    training_commit: str | None = None,
+    metrics: Mapping[str, Any] | None = None,
+    extra: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The contract dict of a stereo graph.
+
+    Args:
+        input_size: (width, height) of the fixed graph input.
+        iters: update iterations frozen into the graph.
+        stereo_config: ``StereoConfig.to_dict()`` of the exported model.
+        dataset: e.g. ``{"path", "seed", "size", "train_frames"}``.
+        training_commit: commit the checkpoint was trained at (``git_commit()`` if None).
+        metrics: measured test metrics (EPE, D1, ...), when known.
+    """
+    w, h = (int(v) for v in input_size)
+    cfg = dict(stereo_config)
+    meta = {
+        "schema": SCHEMA_VERSION,
+        "kind": "stereo",
+        "inputs": {"left": [1, 3, h, w], "right": [1, 3, h, w]},
+        "outputs": {"disparity": [1, 1, h, w]},
+        "input_size": [w, h],
+        "iters": int(iters),
+        "normalisation": dict(STEREO_NORMALISATION),
+        "disparity_units": "input pixels of the graph view (divide by the view scale for frame pixels)",
+        "variant": cfg.get("variant"),
+        "max_disp": cfg.get("max_disp"),
+        "config": cfg,
+        "dataset": dict(dataset or {}),
+        "training_commit": training_commit if training_commit is not None else git_commit(),
+        "metrics": dict(metrics or {}),
+        "exported_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+    }
+    if extra:
+        meta.update(dict(extra))
+    return meta

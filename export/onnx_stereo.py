@@ -1,0 +1,177 @@
+"""Export TSCA-Stereo to one self-describing ONNX file with a fixed input size and iteration count.
+
+* legacy TorchScript exporter (``dynamo=False``), opset 17, a single file (no external data);
+* the iteration loop is unrolled, so the iteration count is frozen into the graph;
+* the graph must contain no ``GridSample`` and no ``ScatterND`` (slow or unsupported on small
+  runtimes) — export fails otherwise;
+* the metadata contract (:mod:`spacepose.export.metadata`) is stored under ``"spacepose"``;
+* parity: torch eager vs onnxruntime on a textured stereo pair, max |Δ| in pixels.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+from torch import nn
+
+from spacepose.errors import BundleError, SpaceposeError
+from spacepose.export.metadata import stereo_metadata
+from spacepose.models.stereo_config import StereoConfig
+from spacepose.onnx_session import make_session, write_metadata
+
+log = logging.getLogger(__name__)
+
+__all__ = ["FORBIDDEN_OPS", "StereoExportWrapper", "export_stereo", "forbidden_ops", "parity_check",
+           "parity_inputs", "export_checkpoint", "export_random_stereo"]
+
+FORBIDDEN_OPS = frozenset({"GridSample", "ScatterND"})
+OPSET = 17
+
+
+class StereoExportWrapper(nn.Module):
+    """``(left, right) -> disparity`` with the iteration count fixed (test mode)."""
+
+    def __init__(self, model: nn.Module, iters: int) -> None:
+        super().__init__()
+        self.model = model
+        self.iters = int(iters)
+
+    def forward(self, left: torch.Tensor, right: torch.Tensor) -> torch.Tensor:
+        return self.model(left, right, iters=self.iters, test_mode=True)
+
+
+def forbidden_ops(model_proto) -> set[str]:
+    """Op types of ``FORBIDDEN_OPS`` found anywhere in the graph (subgraphs included)."""
+    found: set[str] = set()
+
+    def visit(graph) -> None:
+        for node in graph.node:
+            if node.op_type in FORBIDDEN_OPS:
+                found.add(node.op_type)
+            for attr in node.attribute:
+                if attr.g is not None and len(attr.g.node):
+                    visit(attr.g)
+                for g in attr.graphs:
+                    visit(g)
+
+    visit(model_proto.graph)
+    return found
+
+
+def parity_inputs(size: tuple[int, int], seed: int = 0, disparity: float = 12.0) -> tuple[np.ndarray, np.ndarray]:
+    """A textured (1, 3, H, W) float32 pair in [0, 255]: right = left shifted by ``disparity`` px."""
+    w, h = size
+    rng = np.random.default_rng(seed)
+    pad = int(np.ceil(disparity)) + 2
+    tex = rng.uniform(0, 255, size=(h // 4 + 1, (w + pad) // 4 + 1, 3)).astype(np.float32)
+    import cv2
+
+    tex = cv2.resize(tex, ((w + pad), h), interpolation=cv2.INTER_CUBIC)
+    left = tex[:, :w]
+    shift = int(round(disparity))
+    right = tex[:, shift:shift + w]
+    to = lambda a: np.ascontiguousarray(np.clip(a, 0, 255).transpose(2, 0, 1)[None], dtype=np.float32)  # noqa: E731
+    return to(left), to(right)
+
+
+def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int, int], iters: int,
+                  metadata: Mapping[str, Any], force: bool = False, opset: int = OPSET) -> Path:
+    """Export ``model`` at ``size`` (W, H) and ``iters`` into one ONNX file carrying ``metadata``.
+
+    Raises:
+        SpaceposeError: ``path`` exists and ``force`` is False, or the graph holds a forbidden op.
+    """
+    import onnx
+
+    out = Path(path)
+    if out.exists() and not force:
+        raise SpaceposeError(f"{out} exists; pass --force to overwrite")
+    w, h = (int(v) for v in size)
+    if w % 32 or h % 32:
+        raise SpaceposeError(f"export size must be multiples of 32, got {w}x{h}")
+    model = model.eval()
+    wrapper = StereoExportWrapper(model, iters).eval()
+    left, right = (torch.from_numpy(a) for a in parity_inputs((w, h)))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
+        raw = Path(tmp) / "raw.onnx"
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # tracer/constant-folding chatter; parity is checked instead
+            torch.onnx.export(wrapper, (left, right), str(raw), input_names=["left", "right"],
+                              output_names=["disparity"], opset_version=opset, dynamo=False,
+                              do_constant_folding=True, external_data=False)
+        proto = onnx.load(str(raw))
+        bad = forbidden_ops(proto)
+        if bad:
+            raise SpaceposeError(f"exported graph contains forbidden ops {sorted(bad)}")
+        write_metadata(proto, dict(metadata))
+        onnx.checker.check_model(proto)
+        final_tmp = Path(tmp) / "final.onnx"
+        onnx.save(proto, str(final_tmp))
+        os.replace(final_tmp, out)
+    log.info("exported %s (%dx%d, %d iters, %d nodes)", out, w, h, iters, len(proto.graph.node))
+    return out
+
+
+def parity_check(model: nn.Module, onnx_path: str | os.PathLike, *, size: tuple[int, int], iters: int,
+                 seed: int = 0, threads: int = 2) -> float:
+    """max |torch eager - onnxruntime| (pixels) on a textured pair at ``size`` and ``iters``."""
+    left, right = parity_inputs(size, seed)
+    with torch.no_grad():
+        ref = model.eval()(torch.from_numpy(left), torch.from_numpy(right), iters=iters, test_mode=True).numpy()
+    session = make_session(onnx_path, threads=threads)
+    (got,) = session.run(["disparity"], {"left": left, "right": right})
+    if got.shape != ref.shape:
+        raise BundleError(f"onnxruntime output shape {got.shape} != torch {ref.shape}")
+    return float(np.max(np.abs(got.astype(np.float64) - ref.astype(np.float64))))
+
+
+def export_checkpoint(ckpt_path: str | os.PathLike, out: str | os.PathLike, *, iters: int, size: tuple[int, int],
+                      force: bool = False, metrics: Mapping[str, Any] | None = None, parity: bool = True,
+                      tolerance: float = 1e-3) -> dict[str, Any]:
+    """Export a training checkpoint; returns ``{"path", "parity_max_abs_px", "metadata"}``.
+
+    Raises:
+        SpaceposeError: parity worse than ``tolerance`` (the file is removed again).
+    """
+    from spacepose.tools.train_stereo import load_checkpoint, model_from_checkpoint
+
+    ckpt = load_checkpoint(ckpt_path)
+    model, config = model_from_checkpoint(ckpt)
+    train_cfg = ckpt.get("train_config", {})
+    dataset = dict(ckpt.get("dataset", {}))
+    dataset.setdefault("seed", train_cfg.get("seed"))
+    meta = stereo_metadata(input_size=size, iters=iters, stereo_config=config.to_dict(), dataset=dataset,
+                           training_commit=ckpt.get("commit"), metrics=metrics,
+                           extra={"training": {"step": ckpt.get("step"), "train_iters": train_cfg.get("iters"),
+                                               "lr": train_cfg.get("lr"), "batch": train_cfg.get("batch")}})
+    path = export_stereo(model, out, size=size, iters=iters, metadata=meta, force=force)
+    result: dict[str, Any] = {"path": str(path), "metadata": meta, "parity_max_abs_px": None}
+    if parity:
+        diff = parity_check(model, path, size=size, iters=iters)
+        result["parity_max_abs_px"] = diff
+        if not diff < tolerance:
+            path.unlink(missing_ok=True)
+            raise SpaceposeError(f"parity check failed: max |torch - onnxruntime| = {diff:.3g} px >= {tolerance}")
+    return result
+
+
+def export_random_stereo(path: str | os.PathLike, *, size: tuple[int, int] = (64, 64), iters: int = 2,
+                         config: StereoConfig | None = None, seed: int = 0, force: bool = True) -> tuple[Path, nn.Module]:
+    """Export a randomly initialised model (tests, benchmarks of graph cost) -> (path, model)."""
+    torch.manual_seed(seed)
+    from spacepose.models.tsca_stereo import TSCAStereo
+
+    cfg = config or StereoConfig.cpu()
+    model = TSCAStereo(cfg).eval()
+    meta = stereo_metadata(input_size=size, iters=iters, stereo_config=cfg.to_dict(),
+                           dataset={"note": "random init, untrained"}, training_commit=None)
+    meta["training_commit"] = None
+    return export_stereo(model, path, size=size, iters=iters, metadata=meta, force=force), model

@@ -1,0 +1,59 @@
+"""IGEV-Stereo training loss and metrics.
+
+loss = smooth_L1(init_disp, gt) + sum_i gamma_N^(N-1-i) * L1(preds[i], gt),
+gamma_N = gamma^(15 / (N - 1)) (N = 1: the single prediction has weight 1), means over the valid
+pixels: ``valid & finite(gt) & gt < max_disp``. An empty mask gives loss 0 (no NaN).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from spacepose.errors import ShapeError
+
+__all__ = ["sequence_weights", "sequence_loss"]
+
+
+def sequence_weights(n: int, gamma: float = 0.9) -> list[float]:
+    """Weights of the N iteration losses, last = 1."""
+    if n < 1:
+        raise ValueError("need at least one prediction")
+    adjusted = gamma ** (15.0 / (n - 1)) if n > 1 else gamma
+    return [adjusted ** (n - 1 - i) for i in range(n)]
+
+
+def _masked_mean(values: torch.Tensor, mask: torch.Tensor, count: torch.Tensor) -> torch.Tensor:
+    return torch.where(mask, values, torch.zeros_like(values)).sum() / count
+
+
+def sequence_loss(
+    init_disp: torch.Tensor,
+    preds: list[torch.Tensor],
+    gt: torch.Tensor,
+    valid: torch.Tensor,
+    max_disp: float,
+    gamma: float = 0.9,
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """init_disp, preds[i], gt (B, 1, H, W) float; valid (B, 1, H, W) bool.
+
+    Returns (scalar loss, {"epe", "bad1", "bad3"} of the last prediction; bad in % of valid px).
+    """
+    if init_disp.shape != gt.shape or valid.shape != gt.shape or any(p.shape != gt.shape for p in preds):
+        raise ShapeError("init_disp, preds, gt and valid must all be (B, 1, H, W) of one shape")
+    gt_safe = torch.nan_to_num(gt, nan=0.0, posinf=0.0, neginf=0.0)
+    mask = valid.bool() & torch.isfinite(gt) & (gt < max_disp)
+    count = mask.sum().clamp(min=1).to(gt.dtype)
+
+    loss = _masked_mean(F.smooth_l1_loss(init_disp, gt_safe, reduction="none"), mask, count)
+    for weight, pred in zip(sequence_weights(len(preds), gamma), preds):
+        loss = loss + weight * _masked_mean((pred - gt_safe).abs(), mask, count)
+
+    with torch.no_grad():
+        err = (preds[-1] - gt_safe).abs()
+        metrics = {
+            "epe": float(_masked_mean(err, mask, count)),
+            "bad1": float(_masked_mean((err > 1.0).to(err.dtype), mask, count)) * 100.0,
+            "bad3": float(_masked_mean((err > 3.0).to(err.dtype), mask, count)) * 100.0,
+        }
+    return loss, metrics

@@ -1,0 +1,550 @@
+"""The model bundle: the only thing that crosses from training to flight (numpy + onnxruntime).
+
+A bundle is a folder::
+
+    <bundle>/stereo.onnx     stereo graph (TSCA-Stereo, fixed input size and iterations)
+    <bundle>/pose.onnx       pose graph (RGB crop + points -> segmentation, keypoint/centre offsets)
+    <bundle>/bundle.json     the manifest below
+    <bundle>/MODEL_CARD.md   how the graphs were trained and what they measured
+
+``bundle.json`` (schema ``"spacepose.bundle/1"``; every key required unless marked optional)::
+
+    {
+      "schema": "spacepose.bundle/1",
+      "target": {"name": "tdrs", "mesh_scale": 0.0473501498,
+                 "keypoints": [[x, y, z], ...],        # (M, 3) object frame, metres, M >= 3
+                 "centre": [x, y, z],
+                 "radius": 3.03,                       # bounding-sphere radius about "centre", metres
+                 "bbox_min": [x, y, z], "bbox_max": [x, y, z],
+                 "surface_points": [[x, y, z], ...]},  # optional (S, 3), for ICP refinement
+      "stereo": {"file": "stereo.onnx", "input_size": [256, 256], "iters": 8,
+                 "normalisation": "rgb_0_255", "max_disp": 192,
+                 "disparity_range_px": [lo, hi],       # optional: disparities (graph input px) seen
+                                                       # in training; derived from "rig" if absent
+                 "window_margin": 1.25},               # optional, roi.square_window's margin
+      "pose": {"file": "pose.onnx", "n_keypoints": 8,
+               "n_points": 1024, "k": 16, "n_levels": 3, "crop_size": [128, 128],
+               "ratio": 4, "xyz_scale": 2.5, "use_normals": false,   # optional (PoseInputSpec
+               "sampling": "fps", "seed": 0,                         #  defaults)
+               "offset_sign": 1},                      # optional: vote = point + sign * offset
+      "voting": {"bandwidth_fraction": 0.05,           # of the target diameter (2 * radius)
+                 "k_sigma": 3.0, "sigma_d_px": 0.25,   # stereo disparity noise, graph input px
+                 "kernel": "gaussian", "n_seeds": 16,
+                 "min_points": 64, "min_cluster_fraction": 0.3,
+                 "min_keypoint_fraction": 0.3, "max_fit_rms_factor": 1.0,
+                 "seg_threshold": 0.5, "depth_margin": 0.2},   # all optional (defaults here)
+      "rig": {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0},
+      "distance_range_m": [10.0, 50.0],
+      "dataset": {"seed": 0, "size": 10000},
+      "training_commit": "abc1234",
+      "metrics": {...}                                 # free-form measured test metrics
+    }
+
+Each ONNX file carries JSON metadata under ``custom_metadata_map["spacepose"]``; every key it
+shares with the bundle's section for that graph (``input_size``, ``iters``, ``normalisation``,
+``max_disp`` for stereo; every :class:`~spacepose.pose_inputs.PoseInputSpec` field but ``seed``,
+``n_keypoints``, ``keypoints``, ``centre`` for pose; ``target`` for both) must agree, and a ``kind`` key, when
+present, must name the graph. :func:`load_bundle` refuses a bundle that breaks any of this with
+:class:`~spacepose.errors.BundleError`, and :meth:`ModelBundle.check_fits` refuses a calibration
+under which the target's disparities leave the range the stereo graph was trained for.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from .errors import BundleError
+from .pose_inputs import PoseInputSpec
+
+__all__ = [
+    "SCHEMA",
+    "DEFAULT_BUNDLE_DIR",
+    "StereoGraphConfig",
+    "PoseGraphConfig",
+    "VotingConfig",
+    "TrainingRig",
+    "ModelBundle",
+    "load_bundle",
+    "read_graph_metadata",
+    "expected_disparity_px",
+    "DISPARITY_TOLERANCE",
+]
+
+logger = logging.getLogger(__name__)
+
+SCHEMA = "spacepose.bundle/1"
+DEFAULT_BUNDLE_DIR = Path(__file__).resolve().parent / "bundles" / "default"
+#: relative slack on the trained disparity range accepted by :meth:`ModelBundle.check_fits`
+DISPARITY_TOLERANCE = 0.25
+REQUIRED_FILES = ("bundle.json", "MODEL_CARD.md")
+
+
+# ----------------------------------------------------------------------------------- configs
+@dataclass(frozen=True)
+class StereoGraphConfig:
+    """The stereo graph's contract: input size (w, h), iterations, normalisation, disparity range."""
+
+    file: str = "stereo.onnx"
+    input_size: tuple[int, int] = (256, 256)
+    iters: int = 8
+    normalisation: str = "rgb_0_255"
+    max_disp: float = 192.0
+    disparity_range_px: tuple[float, float] | None = None
+    window_margin: float = 1.25
+
+
+@dataclass(frozen=True)
+class PoseGraphConfig:
+    """The pose graph's contract: its input spec (what :mod:`spacepose.pose_inputs` builds) and
+    keypoint count. ``offset_sign``: a vote is ``point + offset_sign * offset`` (the graph's
+    convention is ``offset = keypoint - point``, sign +1)."""
+
+    file: str = "pose.onnx"
+    n_keypoints: int = 8
+    offset_sign: int = 1
+    n_points: int = 1024
+    k: int = 16
+    n_levels: int = 3
+    ratio: int = 4
+    crop_size: tuple[int, int] = (128, 128)
+    xyz_scale: float = 2.5
+    use_normals: bool = False
+    sampling: str = "fps"
+    seed: int = 0
+
+    @property
+    def input_spec(self) -> PoseInputSpec:
+        return PoseInputSpec(n_points=self.n_points, k=self.k, n_levels=self.n_levels, ratio=self.ratio,
+                             crop_size=self.crop_size, xyz_scale=self.xyz_scale,
+                             use_normals=self.use_normals, sampling=self.sampling, seed=self.seed)
+
+
+@dataclass(frozen=True)
+class VotingConfig:
+    """MeanShift bandwidth rule and the validity thresholds of :mod:`spacepose.pose_stage`.
+
+    bandwidth = max(bandwidth_fraction * target diameter, k_sigma * sigma_Z) with
+    sigma_Z = Z^2 * sigma_d / (f * B) (``sigma_d_px`` in stereo graph input pixels).
+    """
+
+    bandwidth_fraction: float = 0.05
+    k_sigma: float = 3.0
+    sigma_d_px: float = 0.25
+    kernel: str = "gaussian"
+    n_seeds: int = 16
+    min_points: int = 64
+    min_cluster_fraction: float = 0.3
+    min_keypoint_fraction: float = 0.3
+    max_fit_rms_factor: float = 1.0
+    seg_threshold: float = 0.5
+    depth_margin: float = 0.2
+
+
+@dataclass(frozen=True)
+class TrainingRig:
+    """The (rectified) rig the graphs were trained with: image size (w, h), focal, baseline."""
+
+    image_size: tuple[int, int]
+    focal_px: float
+    baseline_m: float
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    array = np.array(array, dtype=np.float64, copy=True)
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class ModelBundle:
+    """A loaded, validated model bundle (see the module docstring for the file format).
+
+    Attributes:
+        path: the bundle folder.
+        target_name, mesh_scale: which target and how its mesh was scaled (metres per mesh unit).
+        keypoints: (M, 3) float64 object-frame keypoints; ``centre`` (3,) the object-frame centre.
+        radius: bounding-sphere radius about ``centre`` (m); ``bbox_min``/``bbox_max`` (3,) the
+            object-frame bounding box (overlays, ICP sanity); ``surface_points`` (S, 3), maybe empty.
+        stereo, pose, voting: graph and voting configs; ``rig``: the training rig.
+        distance_range_m: (near, far) target distance the graphs were trained for.
+        dataset_seed, dataset_size, training_commit, metrics: provenance and measured numbers.
+        graph_metadata: the JSON metadata read from each graph (``{"stereo": {...}, "pose": {...}}``).
+    """
+
+    path: Path
+    target_name: str
+    mesh_scale: float
+    keypoints: np.ndarray
+    centre: np.ndarray
+    radius: float
+    bbox_min: np.ndarray
+    bbox_max: np.ndarray
+    surface_points: np.ndarray
+    stereo: StereoGraphConfig
+    pose: PoseGraphConfig
+    voting: VotingConfig
+    rig: TrainingRig
+    distance_range_m: tuple[float, float]
+    dataset_seed: int | None
+    dataset_size: int | None
+    training_commit: str
+    metrics: Mapping[str, Any] = field(default_factory=dict)
+    graph_metadata: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+
+    @property
+    def stereo_path(self) -> Path:
+        return self.path / self.stereo.file
+
+    @property
+    def pose_path(self) -> Path:
+        return self.path / self.pose.file
+
+    @property
+    def diameter(self) -> float:
+        return 2.0 * self.radius
+
+    @property
+    def bbox_corners(self) -> np.ndarray:
+        """(8, 3) object-frame corners of the bounding box (for overlays)."""
+        lo, hi = self.bbox_min, self.bbox_max
+        return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+    def trained_disparity_px(self) -> tuple[float, float]:
+        """Disparity range (stereo graph input pixels) the stereo graph was trained for."""
+        if self.stereo.disparity_range_px is not None:
+            return self.stereo.disparity_range_px
+        ranges = expected_disparity_px(self, self.rig.focal_px, self.rig.baseline_m, self.rig.image_size)
+        return (min(r[0] for r in ranges.values()), max(r[1] for r in ranges.values()))
+
+    def check_fits(self, rig: Any) -> None:
+        """Refuse a calibration under which the stereo graph would see disparities it never saw.
+
+        For the target anywhere in ``distance_range_m``, the disparity in graph input pixels of the
+        coarse (letterboxed full frame) and the fine (ROI window) pass must lie within the trained
+        range widened by :data:`DISPARITY_TOLERANCE`.
+
+        Args:
+            rig: a :class:`~spacepose.calibration.rig.StereoRig` (focal from ``M1``, baseline
+                ``||T||``) or a :class:`~spacepose.calibration.rectify.Rectification`.
+
+        Raises:
+            BundleError: saying which pass, the disparity range it would see and the trained one.
+        """
+        focal, baseline, size = _rig_numbers(rig)
+        lo, hi = self.trained_disparity_px()
+        lo_ok, hi_ok = lo * (1.0 - DISPARITY_TOLERANCE), hi * (1.0 + DISPARITY_TOLERANCE)
+        near, far = self.distance_range_m
+        for name, (d_lo, d_hi) in expected_disparity_px(self, focal, baseline, size).items():
+            if d_lo < lo_ok or d_hi > hi_ok:
+                raise BundleError(
+                    f"bundle {self.path.name!r} does not fit this calibration: at {near:g}-{far:g} m the "
+                    f"{name} pass would see {d_lo:.1f}-{d_hi:.1f} px disparity (f={focal:.1f} px, "
+                    f"B={baseline:.3f} m, {size[0]}x{size[1]}), but the stereo graph was trained for "
+                    f"{lo:.1f}-{hi:.1f} px (rig f={self.rig.focal_px:g} px, B={self.rig.baseline_m:g} m, "
+                    f"{self.rig.image_size[0]}x{self.rig.image_size[1]}); retrain or use a matching rig"
+                )
+
+
+def _rig_numbers(rig: Any) -> tuple[float, float, tuple[int, int]]:
+    if hasattr(rig, "focal_px") and hasattr(rig, "image_size"):  # Rectification
+        return float(rig.focal_px), float(rig.baseline_m), tuple(rig.image_size)
+    try:
+        return float(np.asarray(rig.M1)[0, 0]), float(rig.baseline_m), tuple(rig.image_size)
+    except AttributeError as err:
+        raise TypeError(f"check_fits needs a StereoRig or Rectification, got {type(rig).__name__}") from err
+
+
+def expected_disparity_px(bundle: ModelBundle, focal_px: float, baseline_m: float,
+                          image_size: tuple[int, int]) -> dict[str, tuple[float, float]]:
+    """Disparity (stereo graph input px) of the target over the bundle's distance range, per pass.
+
+    * coarse: d = f B / Z times the letterbox scale ``min(w_in / W, h_in / H)``;
+    * fine: the ROI window's side is ``margin * (target width + d)`` so the window disparity,
+      ``w_in * B / (margin * (width_m + B))``, does not depend on Z or f; the target's width in
+      metres lies between its smallest bounding-box extent and its bounding-sphere diameter.
+    """
+    near, far = bundle.distance_range_m
+    w_in, h_in = bundle.stereo.input_size
+    s = min(w_in / image_size[0], h_in / image_size[1])
+    coarse = (focal_px * baseline_m / far * s, focal_px * baseline_m / near * s)
+    margin = bundle.stereo.window_margin
+    smallest = float(np.min(bundle.bbox_max - bundle.bbox_min))
+    fine = (w_in * baseline_m / (margin * (2.0 * bundle.radius + baseline_m)),
+            w_in * baseline_m / (margin * (smallest + baseline_m)))
+    return {"coarse": coarse, "fine": fine}
+
+
+# ----------------------------------------------------------------------------------- parsing
+def _get(section: Mapping[str, Any], key: str, where: str) -> Any:
+    if not isinstance(section, Mapping):
+        raise BundleError(f"bundle.json: {where} must be an object, got {type(section).__name__}")
+    if key not in section:
+        raise BundleError(f"bundle.json: missing key {where}.{key}")
+    return section[key]
+
+
+def _number(value: Any, where: str, positive: bool = True) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise BundleError(f"bundle.json: {where} must be a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise BundleError(f"bundle.json: {where} must be > 0, got {value!r}")
+    return float(value)
+
+
+def _integer(value: Any, where: str, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise BundleError(f"bundle.json: {where} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _vector(value: Any, where: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise BundleError(f"bundle.json: {where} must be numeric, got {value!r:.80}") from err
+    if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
+        want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
+        raise BundleError(f"bundle.json: {where} must have shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise BundleError(f"bundle.json: {where} must be finite")
+    return arr
+
+
+def _size(value: Any, where: str) -> tuple[int, int]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise BundleError(f"bundle.json: {where} must be [width, height], got {value!r}")
+    return (_integer(value[0], where + "[0]"), _integer(value[1], where + "[1]"))
+
+
+def _range(value: Any, where: str) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise BundleError(f"bundle.json: {where} must be [low, high], got {value!r}")
+    lo, hi = _number(value[0], where + "[0]"), _number(value[1], where + "[1]")
+    if not lo < hi:
+        raise BundleError(f"bundle.json: {where} must have low < high, got {value!r}")
+    return (lo, hi)
+
+
+def _optional_fields(cls: type, section: Mapping[str, Any], where: str) -> dict[str, Any]:
+    known = set(cls.__dataclass_fields__)
+    unknown = sorted(set(section) - known)
+    if unknown:
+        raise BundleError(f"bundle.json: unknown keys in {where}: {unknown}; valid: {sorted(known)}")
+    return dict(section)
+
+
+def _parse_stereo(section: Any) -> StereoGraphConfig:
+    where = "stereo"
+    data = _optional_fields(StereoGraphConfig, section if isinstance(section, Mapping) else {}, where)
+    _get(section, "file", where)
+    out = StereoGraphConfig(
+        file=str(data["file"]),
+        input_size=_size(_get(section, "input_size", where), "stereo.input_size"),
+        iters=_integer(_get(section, "iters", where), "stereo.iters"),
+        normalisation=str(_get(section, "normalisation", where)),
+        max_disp=_number(_get(section, "max_disp", where), "stereo.max_disp"),
+        disparity_range_px=(None if data.get("disparity_range_px") is None
+                            else _range(data["disparity_range_px"], "stereo.disparity_range_px")),
+        window_margin=_number(data.get("window_margin", 1.25), "stereo.window_margin"),
+    )
+    if out.window_margin < 1.0:
+        raise BundleError(f"bundle.json: stereo.window_margin must be >= 1, got {out.window_margin}")
+    return out
+
+
+def _parse_pose(section: Any) -> PoseGraphConfig:
+    where = "pose"
+    if not isinstance(section, Mapping):
+        raise BundleError(f"bundle.json: pose must be an object, got {type(section).__name__}")
+    data = _optional_fields(PoseGraphConfig, section, where)
+    sign = data.get("offset_sign", 1)
+    if sign not in (1, -1) or isinstance(sign, bool):
+        raise BundleError(f"bundle.json: pose.offset_sign must be 1 or -1, got {sign!r}")
+    use_normals = data.get("use_normals", False)
+    if not isinstance(use_normals, bool):
+        raise BundleError(f"bundle.json: pose.use_normals must be true/false, got {use_normals!r}")
+    out = PoseGraphConfig(
+        file=str(_get(section, "file", where)),
+        n_keypoints=_integer(_get(section, "n_keypoints", where), "pose.n_keypoints", minimum=3),
+        offset_sign=int(sign),
+        n_points=_integer(_get(section, "n_points", where), "pose.n_points"),
+        k=_integer(_get(section, "k", where), "pose.k"),
+        n_levels=_integer(_get(section, "n_levels", where), "pose.n_levels"),
+        ratio=_integer(data.get("ratio", 4), "pose.ratio"),
+        crop_size=_size(_get(section, "crop_size", where), "pose.crop_size"),
+        xyz_scale=_number(data.get("xyz_scale", 2.5), "pose.xyz_scale"),
+        use_normals=use_normals,
+        sampling=str(data.get("sampling", "fps")),
+        seed=_integer(data.get("seed", 0), "pose.seed", minimum=0),
+    )
+    try:
+        out.input_spec
+    except ValueError as err:
+        raise BundleError(f"bundle.json: invalid pose input spec: {err}") from err
+    return out
+
+
+def _parse_voting(section: Any) -> VotingConfig:
+    if section is None:
+        return VotingConfig()
+    data = _optional_fields(VotingConfig, section if isinstance(section, Mapping) else {"?": 0}, "voting")
+    defaults = VotingConfig()
+    values: dict[str, Any] = {}
+    for name in VotingConfig.__dataclass_fields__:
+        default = getattr(defaults, name)
+        value = data.get(name, default)
+        where = f"voting.{name}"
+        if isinstance(default, str):
+            if not isinstance(value, str):
+                raise BundleError(f"bundle.json: {where} must be a string, got {value!r}")
+        elif isinstance(default, int):
+            value = _integer(value, where)
+        else:
+            value = _number(value, where)
+        values[name] = value
+    if values["kernel"] not in ("flat", "gaussian"):
+        raise BundleError(f"bundle.json: voting.kernel must be 'flat' or 'gaussian', got {values['kernel']!r}")
+    for name in ("min_cluster_fraction", "min_keypoint_fraction", "seg_threshold"):
+        if not 0.0 < values[name] < 1.0:
+            raise BundleError(f"bundle.json: voting.{name} must be in (0, 1), got {values[name]!r}")
+    return VotingConfig(**values)
+
+
+def _parse_manifest(data: Any, path: Path) -> ModelBundle:
+    if not isinstance(data, dict):
+        raise BundleError(f"bundle.json must hold an object, got {type(data).__name__}")
+    schema = data.get("schema")
+    if schema != SCHEMA:
+        raise BundleError(f"bundle.json: schema must be {SCHEMA!r}, got {schema!r}")
+    target = _get(data, "target", "")
+    keypoints = _vector(_get(target, "keypoints", "target"), "target.keypoints", (None, 3))
+    if keypoints.shape[0] < 3:
+        raise BundleError(f"bundle.json: target.keypoints needs >= 3 keypoints, got {keypoints.shape[0]}")
+    bbox_min = _vector(_get(target, "bbox_min", "target"), "target.bbox_min", (3,))
+    bbox_max = _vector(_get(target, "bbox_max", "target"), "target.bbox_max", (3,))
+    if not np.all(bbox_max > bbox_min):
+        raise BundleError("bundle.json: target.bbox_max must exceed target.bbox_min on every axis")
+    surface = target.get("surface_points")
+    surface = np.zeros((0, 3)) if surface is None else _vector(surface, "target.surface_points", (None, 3))
+    pose = _parse_pose(_get(data, "pose", ""))
+    if pose.n_keypoints != keypoints.shape[0]:
+        raise BundleError(f"bundle.json: pose.n_keypoints={pose.n_keypoints} but target.keypoints holds "
+                          f"{keypoints.shape[0]}")
+    rig = _get(data, "rig", "")
+    dataset = data.get("dataset") or {}
+    metrics = data.get("metrics") or {}
+    if not isinstance(metrics, dict) or not isinstance(dataset, dict):
+        raise BundleError("bundle.json: metrics and dataset must be objects")
+    return ModelBundle(
+        path=path,
+        target_name=str(_get(target, "name", "target")),
+        mesh_scale=_number(_get(target, "mesh_scale", "target"), "target.mesh_scale"),
+        keypoints=_frozen(keypoints),
+        centre=_frozen(_vector(_get(target, "centre", "target"), "target.centre", (3,))),
+        radius=_number(_get(target, "radius", "target"), "target.radius"),
+        bbox_min=_frozen(bbox_min),
+        bbox_max=_frozen(bbox_max),
+        surface_points=_frozen(surface),
+        stereo=_parse_stereo(_get(data, "stereo", "")),
+        pose=pose,
+        voting=_parse_voting(data.get("voting")),
+        rig=TrainingRig(
+            image_size=_size(_get(rig, "image_size", "rig"), "rig.image_size"),
+            focal_px=_number(_get(rig, "focal_px", "rig"), "rig.focal_px"),
+            baseline_m=_number(_get(rig, "baseline_m", "rig"), "rig.baseline_m"),
+        ),
+        distance_range_m=_range(_get(data, "distance_range_m", ""), "distance_range_m"),
+        dataset_seed=dataset.get("seed"),
+        dataset_size=dataset.get("size"),
+        training_commit=str(data.get("training_commit", "unknown")),
+        metrics=metrics,
+    )
+
+
+# ----------------------------------------------------------------------------------- graphs
+def read_graph_metadata(path: str | os.PathLike) -> dict[str, Any]:
+    """The JSON contract stored under ``custom_metadata_map["spacepose"]`` of an ONNX file.
+
+    Raises:
+        BundleError: the file is missing, not a loadable ONNX model, or its metadata is absent or
+            not a JSON object.
+    """
+    from .onnx_session import read_metadata
+
+    return read_metadata(path)
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, str) or isinstance(b, str):
+        return str(a) == str(b)
+    try:
+        x, y = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    except (TypeError, ValueError):
+        return a == b
+    return x.shape == y.shape and bool(np.allclose(x, y, rtol=1e-6, atol=1e-9))
+
+
+def _check_metadata(bundle: ModelBundle, kind: str, meta: Mapping[str, Any]) -> None:
+    if "kind" in meta and str(meta["kind"]) != kind:
+        raise BundleError(f"{kind} graph metadata says kind={meta['kind']!r}")
+    if kind == "stereo":
+        s = bundle.stereo
+        expect = {"input_size": list(s.input_size), "iters": s.iters, "normalisation": s.normalisation,
+                  "max_disp": s.max_disp}
+    else:
+        p = bundle.pose
+        expect = {"n_points": p.n_points, "crop_size": list(p.crop_size), "k": p.k, "n_levels": p.n_levels,
+                  "ratio": p.ratio, "xyz_scale": p.xyz_scale, "use_normals": p.use_normals,
+                  "sampling": p.sampling, "n_keypoints": p.n_keypoints, "keypoints": bundle.keypoints,
+                  "centre": bundle.centre}
+    expect["target"] = bundle.target_name
+    for key, value in expect.items():
+        if key in meta and not _same(meta[key], value):
+            raise BundleError(f"{kind} graph metadata disagrees with bundle.json on {key!r}: "
+                              f"graph {meta[key]!r:.120} vs bundle {value!r:.120}")
+
+
+# ----------------------------------------------------------------------------------- loading
+def load_bundle(path: str | os.PathLike | None = None, verify_graphs: bool = True) -> ModelBundle:
+    """Load and validate a model bundle folder (``None``: the default bundle shipped in the package).
+
+    Args:
+        path: bundle folder.
+        verify_graphs: read each graph's embedded metadata and check it against ``bundle.json``
+            (opens a short-lived onnxruntime session per graph).
+
+    Raises:
+        BundleError: missing folder or files, invalid JSON or schema, or graph metadata that
+            disagrees with ``bundle.json``.
+    """
+    folder = DEFAULT_BUNDLE_DIR if path is None else Path(path)
+    if not folder.is_dir():
+        hint = " (no default bundle is installed: train and export one, or pass a bundle folder)" if path is None else ""
+        raise BundleError(f"model bundle folder {folder} does not exist{hint}")
+    for name in REQUIRED_FILES:
+        if not (folder / name).is_file():
+            raise BundleError(f"model bundle {folder} is missing {name}")
+    try:
+        data = json.loads((folder / "bundle.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise BundleError(f"model bundle {folder}: bundle.json is unreadable or not JSON: {err}") from err
+    bundle = _parse_manifest(data, folder)
+    for kind, file in (("stereo", bundle.stereo_path), ("pose", bundle.pose_path)):
+        if not file.is_file():
+            raise BundleError(f"model bundle {folder} is missing {file.name}")
+    if verify_graphs:
+        metadata = {}
+        for kind, file in (("stereo", bundle.stereo_path), ("pose", bundle.pose_path)):
+            metadata[kind] = read_graph_metadata(file)
+            _check_metadata(bundle, kind, metadata[kind])
+        object.__setattr__(bundle, "graph_metadata", metadata)
+    logger.debug("loaded bundle %s (target %s, commit %s)", folder, bundle.target_name, bundle.training_commit)
+    return bundle

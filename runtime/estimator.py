@@ -1,0 +1,414 @@
+"""PoseEstimator: raw stereo pair -> pose of the target in the left rectified camera frame.
+
+The flow of one frame (DESIGN.md), each step a named stage timed in ``PoseResult.timings_ms``::
+
+    validate -> rectify -> stereo (coarse pass or prior ROI, fine pass) -> points (triangulate,
+    back-project, sample) -> pose_inputs (crop, kNN indices) -> pose_net (ONNX) -> voting
+    (MeanShift + SVD fit, validity, confidence) [-> refine (ICP, off by default)]
+
+Input rule (one rule, no exceptions): an argument that is not a numpy array is a programming error
+and raises :class:`~spacepose.errors.ShapeError`; every numpy array the estimator cannot use — wrong
+rank or channel count, a dtype other than uint8/uint16/float, left and right of different shapes, a
+size that does not match the calibration, NaN/inf in a float image — gives a result with
+``valid=False, status="bad_input"`` and the reason in ``detail``. Float images are read on the
+0-255 scale. An all-dark frame (eclipse) gives ``no_target``; a saturated frame ``bad_input``.
+
+Thread safety: :meth:`PoseEstimator.estimate` may be called from several threads. The onnxruntime
+sessions and the rectification maps are safe to share; the only mutable state, the previous pose
+used as the next frame's ROI prior, is read and written under ``self._lock``. With concurrent
+calls the prior is that of whichever frame finished last.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import roi
+from .bundle import ModelBundle, load_bundle
+from .errors import ShapeError
+from .geometry import backproject, disparity_to_depth, sample_indices
+from .pose_inputs import build_pose_inputs
+from .pose_stage import PoseStageResult, solve_pose
+from .profiler import StageTimer
+
+__all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
+
+logger = logging.getLogger(__name__)
+
+#: a frame whose brightest pixel is at most this fraction of full scale is "dark" (eclipse)
+DARK_FRACTION = 0.02
+#: a frame with more than this fraction of pixels at full scale is "saturated"
+SATURATED_FRACTION = 0.5
+#: pose crop side = this margin * longest side of the target pixels' box
+POSE_CROP_MARGIN = 1.1
+
+
+@dataclass(frozen=True, eq=False)
+class PoseResult:
+    """Pose of the target for one stereo frame.
+
+    Attributes:
+        R: (3, 3) float64, ``X_cam = R @ X_obj + t`` (left rectified camera); NaN when unknown.
+        t: (3,) float64 metres; NaN when unknown.
+        q_wxyz: (4,) float64 scalar-first quaternion of ``R`` (NaN when unknown).
+        valid: whether the pose can be used.
+        status: ``"ok"`` or why not (``no_target``, ``too_few_points``, ``weak_votes``,
+            ``fit_residual``, ``out_of_range``, ``bad_input``).
+        confidence: in [0, 1] (see :mod:`spacepose.pose_stage`); 0 when not valid.
+        timings_ms: wall time per named stage.
+        n_points: target points the pose was voted from (centre-cluster inliers; 0 if none).
+        roi: left-image box ``(x0, y0, x1, y1)`` of the stereo fine pass, or ``None``.
+        detail: a human-readable reason for an invalid result ("" when valid).
+    """
+
+    R: np.ndarray
+    t: np.ndarray
+    q_wxyz: np.ndarray
+    valid: bool
+    status: str
+    confidence: float
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    n_points: int = 0
+    roi: tuple[int, int, int, int] | None = None
+    detail: str = ""
+
+    def to_dict(self, frame: str | None = None) -> dict[str, Any]:
+        """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
+
+        def clean(values: np.ndarray) -> Any:
+            return [clean(v) for v in values] if values.ndim > 1 else [
+                float(v) if math.isfinite(v) else None for v in values]
+
+        out: dict[str, Any] = {} if frame is None else {"frame": frame}
+        out.update({
+            "valid": bool(self.valid),
+            "status": self.status,
+            "R": clean(np.asarray(self.R)),
+            "t": clean(np.asarray(self.t)),
+            "q_wxyz": clean(np.asarray(self.q_wxyz)),
+            "confidence": float(self.confidence),
+            "timings_ms": {k: round(float(v), 3) for k, v in self.timings_ms.items()},
+            "n_points": int(self.n_points),
+            "roi": None if self.roi is None else [int(v) for v in self.roi],
+        })
+        if self.detail:
+            out["detail"] = self.detail
+        return out
+
+
+def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """Scalar-first unit quaternion ``[w, x, y, z]`` of a rotation matrix (w >= 0; NaN in, NaN out)."""
+    R = np.asarray(R, dtype=np.float64)
+    if not np.all(np.isfinite(R)):
+        return np.full(4, np.nan)
+    m00, m11, m22 = R[0, 0], R[1, 1], R[2, 2]
+    trace = m00 + m11 + m22
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif m00 > m11 and m00 > m22:
+        s = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
+        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif m11 > m22:
+        s = 2.0 * math.sqrt(1.0 + m11 - m00 - m22)
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + m22 - m00 - m11)
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+    q = np.asarray(q)
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+def pose_crop_window(pixels: np.ndarray, margin: float = POSE_CROP_MARGIN, min_side: int = 16) -> roi.Window:
+    """Square left-image window around the target pixels (N, 2) ``(u, v)`` that the pose graph sees.
+
+    The side is ``margin`` times the longest side of the pixels' box (at least ``min_side``),
+    centred on the box; it may leave the image (zero padded). Training must crop the same way.
+    """
+    u0, v0 = pixels.min(axis=0).astype(np.float64)
+    u1, v1 = pixels.max(axis=0).astype(np.float64) + 1.0
+    side = int(math.ceil(max(u1 - u0, v1 - v0, 1.0) * margin))
+    side = max(side, int(min_side))
+    cx, cy = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
+    return roi.Window(int(round(cx - side / 2.0)), int(round(cy - side / 2.0)), side)
+
+
+def _to_rgb_uint8(image: np.ndarray) -> np.ndarray:
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[..., 0]
+    if image.dtype == np.uint8:
+        out = image
+    elif image.dtype == np.uint16:
+        out = (image >> 8).astype(np.uint8)
+    else:
+        out = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+    if out.ndim == 2:
+        out = np.repeat(out[..., None], 3, axis=2)
+    return np.ascontiguousarray(out)
+
+
+def _full_scale(image: np.ndarray) -> float:
+    if image.dtype == np.uint16:
+        return 65535.0
+    return 255.0
+
+
+def refine_icp(R: np.ndarray, t: np.ndarray, scene: np.ndarray, model: np.ndarray, model_normals: np.ndarray,
+               max_distance: float, iterations: int = 5, max_points: int = 500, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Point-to-plane ICP of a pose against stereo points (numpy, brute-force nearest neighbours).
+
+    Each scene point (camera frame) is paired with the nearest model surface sample under the
+    current pose; pairs farther than ``max_distance`` are dropped; the linearised point-to-plane
+    system ``[q x n, n] [w; tau] = n . (p - q)`` (model normals ``n``) is solved by least squares
+    and the small rotation ``exp(w)`` and ``tau`` are applied to the pose. Stops early with fewer
+    than 6 pairs. Returns the refined ``(R, t)``.
+    """
+    R = np.asarray(R, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    scene = np.asarray(scene, dtype=np.float64)
+    if len(scene) > max_points:
+        scene = scene[np.random.default_rng(seed).choice(len(scene), max_points, replace=False)]
+    model = np.asarray(model, dtype=np.float64)
+    normals = np.asarray(model_normals, dtype=np.float64)
+    for _ in range(int(iterations)):
+        q_all = model @ R.T + t
+        n_all = normals @ R.T
+        d2 = (np.einsum("ij,ij->i", scene, scene)[:, None] + np.einsum("ij,ij->i", q_all, q_all)[None]
+              - 2.0 * scene @ q_all.T)
+        nearest = np.argmin(d2, axis=1)
+        close = d2[np.arange(len(scene)), nearest] <= max_distance ** 2
+        if int(close.sum()) < 6:
+            break
+        p, q, n = scene[close], q_all[nearest[close]], n_all[nearest[close]]
+        A = np.hstack([np.cross(q, n), n])
+        b = np.einsum("ij,ij->i", n, p - q)
+        x, *_ = np.linalg.lstsq(A, b, rcond=None)
+        w, tau = x[:3], x[3:]
+        angle = float(np.linalg.norm(w))
+        if angle > 1e-12:
+            k = w / angle
+            K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+            dR = np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+        else:
+            dR = np.eye(3)
+        R, t = dR @ R, dR @ t + tau
+        if angle < 1e-6 and np.linalg.norm(tau) < 1e-6:
+            break
+    return R, t
+
+
+def _surface_normals(points: np.ndarray, k: int = 12) -> np.ndarray:
+    """PCA normals of surface samples (orientation irrelevant for point-to-plane)."""
+    from .pose_inputs import knn_indices
+
+    if len(points) < 3:
+        return np.zeros_like(points)
+    nbr = knn_indices(points, points, min(k, len(points)))
+    nb = points[nbr]
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))
+    return vecs[:, :, 0]
+
+
+class PoseEstimator:
+    """Stereo pose of the bundle's target from raw camera pairs (see the module docstring).
+
+    Args:
+        calib: calibration file (OpenCV FileStorage) or a :class:`~spacepose.calibration.rig.StereoRig`.
+        bundle: model bundle folder, a loaded :class:`~spacepose.bundle.ModelBundle`, or ``None`` for
+            the default bundle.
+        threads: onnxruntime intra-op threads per graph.
+        use_prior: use the previous valid pose's projected bounding sphere as the next frame's ROI
+            (skips the coarse stereo pass).
+        refine: point-to-plane ICP against the stereo points (needs ``surface_points`` in the bundle).
+        seed: seed of the point sampling and MeanShift seeds (results are deterministic).
+
+    Raises:
+        CalibrationError: unreadable calibration. BundleError: unusable bundle, or one that does not
+            fit the calibration (:meth:`ModelBundle.check_fits`).
+    """
+
+    def __init__(self, calib: str | os.PathLike | Any, bundle: str | os.PathLike | ModelBundle | None = None,
+                 threads: int = 2, use_prior: bool = True, refine: bool = False, seed: int = 0) -> None:
+        from .calibration.rectify import rectify
+        from .calibration.rig import StereoRig, load_rig
+        from .onnx_session import make_session
+        from .stereo_stage import StereoMatcher
+
+        if isinstance(calib, (str, Path, os.PathLike)):
+            rig = load_rig(calib)
+        elif isinstance(calib, StereoRig):
+            rig = calib
+        else:
+            raise TypeError(f"calib must be a path or a StereoRig, got {type(calib).__name__}")
+        self.bundle = bundle if isinstance(bundle, ModelBundle) else load_bundle(bundle)
+        self.bundle.check_fits(rig)
+        self.rig = rig
+        self.rectification = rectify(rig)
+        self.K = self.rectification.K
+        self.focal_px = self.rectification.focal_px
+        self.baseline_m = self.rectification.baseline_m
+        self.threads = int(threads)
+        self.use_prior = bool(use_prior)
+        self.refine = bool(refine)
+        self.seed = int(seed)
+        self.stereo = StereoMatcher(self.bundle.stereo_path, threads=self.threads,
+                                    margin=self.bundle.stereo.window_margin)
+        self.pose_session = make_session(self.bundle.pose_path, threads=self.threads)
+        self._pose_outputs = [o.name for o in self.pose_session.get_outputs()]
+        for name in ("seg_logits", "kp_offsets", "ctr_offsets"):
+            if name not in self._pose_outputs:
+                from .errors import BundleError
+
+                raise BundleError(f"pose graph has no output {name!r} (outputs: {self._pose_outputs})")
+        self._spec = self.bundle.pose.input_spec
+        self._surface_normals = (_surface_normals(np.asarray(self.bundle.surface_points))
+                                 if self.refine and len(self.bundle.surface_points) else None)
+        self._lock = threading.Lock()
+        self._prior: PoseResult | None = None
+
+    # ------------------------------------------------------------------ prior
+    def reset(self) -> None:
+        """Forget the previous pose (the next frame runs the coarse stereo pass)."""
+        with self._lock:
+            self._prior = None
+
+    def _roi_hint(self):
+        from .stereo_stage import RoiHint
+
+        if not self.use_prior:
+            return None
+        with self._lock:
+            prior = self._prior
+        if prior is None or not prior.valid:
+            return None
+        centre = prior.R @ self.bundle.centre + prior.t
+        z = float(centre[2])
+        r = self.bundle.radius
+        if z - r <= 0.0:
+            return None
+        uv = self.K @ (centre / z)
+        r_px = self.focal_px * r / (z - r)
+        w, h = self.rig.image_size
+        x0, y0 = int(math.floor(uv[0] - r_px)), int(math.floor(uv[1] - r_px))
+        x1, y1 = int(math.ceil(uv[0] + r_px)) + 1, int(math.ceil(uv[1] + r_px)) + 1
+        x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+        if x1 - x0 < 2 or y1 - y0 < 2:
+            return None
+        fb = self.focal_px * self.baseline_m
+        return RoiHint((x0, y0, x1, y1), fb / (z + r), fb / (z - r))
+
+    # ------------------------------------------------------------------ checks
+    def _input_problem(self, left: Any, right: Any) -> tuple[str, str] | None:
+        """(status, detail) when the pair cannot be used, else None. Raises for non-arrays."""
+        for name, image in (("left", left), ("right", right)):
+            if not isinstance(image, np.ndarray):
+                raise ShapeError(f"{name} must be a numpy array, got {type(image).__name__}")
+        for name, image in (("left", left), ("right", right)):
+            if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3)):
+                return "bad_input", f"{name} has shape {image.shape}; need (H, W), (H, W, 1) or (H, W, 3)"
+            if not (image.dtype in (np.uint8, np.uint16) or np.issubdtype(image.dtype, np.floating)):
+                return "bad_input", f"{name} has dtype {image.dtype}; need uint8, uint16 or float"
+        if left.shape != right.shape or left.dtype != right.dtype:
+            return "bad_input", f"left {left.shape} {left.dtype} and right {right.shape} {right.dtype} differ"
+        w, h = self.rig.image_size
+        if left.shape[1] != w or left.shape[0] != h:
+            return "bad_input", f"images are {left.shape[1]}x{left.shape[0]}, the calibration is {w}x{h}"
+        if np.issubdtype(left.dtype, np.floating):
+            if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right))):
+                return "bad_input", "images hold NaN or inf"
+        full = _full_scale(left)
+        for name, image in (("left", left), ("right", right)):
+            if float(image.max()) <= DARK_FRACTION * full:
+                return "no_target", f"{name} image is dark (eclipse?)"
+            if np.count_nonzero(image >= full) > SATURATED_FRACTION * image.size:
+                return "bad_input", f"{name} image is saturated"
+        return None
+
+    # ------------------------------------------------------------------ main
+    def _result(self, status: str, timer: StageTimer, *, stage: PoseStageResult | None = None,
+                window: roi.Window | None = None, detail: str = "") -> PoseResult:
+        if stage is not None and stage.valid:
+            R, t, conf, valid = stage.R, stage.t, stage.confidence, True
+        else:
+            R, t, conf, valid = np.full((3, 3), np.nan), np.full(3, np.nan), 0.0, False
+        result = PoseResult(R=R, t=t, q_wxyz=rotation_to_quaternion(R), valid=valid, status=status,
+                            confidence=float(conf), timings_ms=dict(timer.timings_ms),
+                            n_points=0 if stage is None else int(stage.n_inliers),
+                            roi=None if window is None else window.bbox, detail=detail)
+        if status != "bad_input":  # a bad frame says nothing about where the target is
+            with self._lock:
+                self._prior = result
+        return result
+
+    def estimate(self, left: np.ndarray, right: np.ndarray) -> PoseResult:
+        """Pose of the target in a raw stereo pair (see the module docstring for the input rule).
+
+        Raises:
+            ShapeError: ``left`` or ``right`` is not a numpy array.
+        """
+        timer = StageTimer()
+        with timer.stage("validate"):
+            problem = self._input_problem(left, right)
+        if problem is not None:
+            logger.info("frame rejected: %s (%s)", problem[0], problem[1])
+            return self._result(problem[0], timer, detail=problem[1])
+
+        with timer.stage("rectify"):
+            left_r, right_r = self.rectification.rectify_pair(left, right)
+        hint = self._roi_hint()
+        with timer.stage("stereo"):
+            stereo = self.stereo.match(left_r, right_r, roi_hint=hint)
+        if stereo.window is None:
+            return self._result("no_target", timer, detail="the coarse stereo pass found no target")
+
+        bundle, voting = self.bundle, self.bundle.voting
+        with timer.stage("points"):
+            depth = disparity_to_depth(stereo.disparity, self.focal_px, self.baseline_m)
+            near, far = bundle.distance_range_m
+            z_lo = max(near * (1.0 - voting.depth_margin) - bundle.radius, 1e-3)
+            z_hi = far * (1.0 + voting.depth_margin) + bundle.radius
+            mask = (depth >= z_lo) & (depth <= z_hi)
+            cloud = backproject(depth, self.K, mask)
+        if len(cloud) < voting.min_points:
+            status = "no_target" if len(cloud) == 0 else "too_few_points"
+            return self._result(status, timer, window=stereo.window,
+                                detail=f"{len(cloud)} stereo points within {z_lo:.1f}-{z_hi:.1f} m")
+
+        with timer.stage("pose_inputs"):
+            idx = sample_indices(len(cloud), self._spec.n_points, self.seed)
+            xyz = np.ascontiguousarray(cloud.points[idx], dtype=np.float32)
+            pixels = cloud.pixels[idx]
+            window = pose_crop_window(pixels)
+            rgb_crop, transform = roi.crop_resize(_to_rgb_uint8(left_r), window, self._spec.crop_size)
+            cw, ch = self._spec.crop_size
+            crop_px = np.rint(transform.to_net(pixels.astype(np.float64))).astype(np.int64)
+            crop_px[:, 0] = np.clip(crop_px[:, 0], 0, cw - 1)
+            crop_px[:, 1] = np.clip(crop_px[:, 1], 0, ch - 1)
+            inputs, _ = build_pose_inputs(rgb_crop, xyz, crop_px, self._spec)
+        with timer.stage("pose_net"):
+            outputs = dict(zip(self._pose_outputs, self.pose_session.run(self._pose_outputs, inputs)))
+        with timer.stage("voting"):
+            stage = solve_pose(
+                xyz.astype(np.float64), outputs["seg_logits"].astype(np.float32),
+                outputs["kp_offsets"].astype(np.float32), outputs["ctr_offsets"].astype(np.float32),
+                bundle.keypoints, bundle.centre, config=voting, diameter_m=bundle.diameter,
+                distance_range_m=bundle.distance_range_m, focal_px=self.focal_px, baseline_m=self.baseline_m,
+                sigma_d_px=voting.sigma_d_px / max(stereo.scale, 1e-9), offset_sign=bundle.pose.offset_sign,
+                seed=self.seed)
+        if stage.valid and self.refine and self._surface_normals is not None:
+            with timer.stage("refine"):
+                R, t = refine_icp(stage.R, stage.t, xyz, np.asarray(bundle.surface_points),
+                                  self._surface_normals, max_distance=2.0 * stage.bandwidth, seed=self.seed)
+                stage = PoseStageResult(**{**stage.__dict__, "R": R, "t": t})
+        return self._result(stage.status, timer, stage=stage, window=stereo.window,
+                            detail="" if stage.valid else f"pose stage: {stage.status}")

@@ -1,0 +1,105 @@
+import numpy as np
+import pytest
+
+from spacepose import roi
+from spacepose.errors import BundleError, ShapeError
+from spacepose.stereo_stage import RoiHint, StereoMatcher, to_net_input, validate_stereo_metadata
+
+
+def _oracle(target_disp: float):
+    """A fake graph: disparity = target_disp * (left view brightness > 0)."""
+
+    def infer(left, right):
+        return np.where(left[0].mean(axis=0) > 10, np.float32(target_disp), np.float32(0.0))
+
+    return infer
+
+
+class TestValidateMetadata:
+    def test_ok(self):
+        meta = {"kind": "stereo", "input_size": [64, 32], "iters": 2, "max_disp": 96}
+        assert validate_stereo_metadata(meta, {"left": [1, 3, 32, 64], "right": [1, 3, 32, 64]}) == ((64, 32), 2, 96.0)
+
+    @pytest.mark.parametrize("meta", [{"kind": "pose", "input_size": [64, 64], "iters": 2},
+                                      {"kind": "stereo", "iters": 2},
+                                      {"kind": "stereo", "input_size": [64, 64], "iters": 0}])
+    def test_bad(self, meta):
+        with pytest.raises(BundleError):
+            validate_stereo_metadata(meta)
+
+    def test_shape_mismatch(self):
+        meta = {"kind": "stereo", "input_size": [64, 64], "iters": 2}
+        with pytest.raises(BundleError, match="metadata says"):
+            validate_stereo_metadata(meta, {"left": [1, 3, 32, 32], "right": [1, 3, 32, 32]})
+
+
+def test_to_net_input():
+    grey = np.full((4, 5), 7, np.uint8)
+    x = to_net_input(grey)
+    assert x.shape == (1, 3, 4, 5) and x.dtype == np.float32 and np.all(x == 7)
+    x16 = to_net_input(np.full((4, 5, 3), 65535, np.uint16))
+    assert np.allclose(x16, 255.0)
+
+
+class TestMatcherGeometry:
+    def _frame(self):
+        left = np.zeros((120, 160), np.uint8)
+        left[40:80, 60:110] = 200
+        return left, left.copy()
+
+    def test_coarse_then_fine_window_and_scale(self):
+        left, right = self._frame()
+        # the oracle outputs 10 net px everywhere it sees target: full-frame disparity is 10 / s
+        m = StereoMatcher.from_callable(_oracle(10.0), (64, 64), iters=2, max_disp=96)
+        res = m.match(left, right)
+        assert res.status == "fine" and res.window is not None
+        assert res.disparity.shape == (120, 160) and res.disparity.dtype == np.float32
+        x0, y0, x1, y1 = res.coarse_bbox
+        assert x0 <= 61 and y0 <= 41 and x1 >= 109 and y1 >= 79
+        assert res.scale == pytest.approx(64 / res.window.side)
+        assert res.disparity[60, 85] == pytest.approx(10.0 / res.scale, rel=1e-4)
+        assert res.disparity[5, 5] == 0.0  # outside the window
+        assert {"coarse_ms", "fine_ms", "total_ms"} <= set(res.timings_ms)
+
+    def test_roi_hint_skips_coarse(self):
+        left, right = self._frame()
+        m = StereoMatcher.from_callable(_oracle(5.0), (64, 64), iters=2)
+        res = m.match(left, right, roi_hint=RoiHint((60, 40, 110, 80), 0.0, 8.0))
+        assert res.coarse_bbox is None and "coarse_ms" not in res.timings_ms
+        w = res.window
+        assert w.x0 <= 60 - 8 and w.x0 + w.side >= 110
+
+    def test_no_target(self):
+        blank = np.zeros((120, 160), np.uint8)
+        m = StereoMatcher.from_callable(_oracle(10.0), (64, 64), iters=2)
+        res = m.match(blank, blank)
+        assert res.status == "no_target" and res.window is None and not res.disparity.any()
+
+    def test_bad_input(self):
+        m = StereoMatcher.from_callable(_oracle(1.0), (64, 64), iters=2)
+        with pytest.raises(ShapeError, match="same shape"):
+            m.match(np.zeros((40, 40), np.uint8), np.zeros((40, 41), np.uint8))
+        with pytest.raises(ShapeError):
+            m.match(np.zeros((40, 40, 2), np.uint8), np.zeros((40, 40, 2), np.uint8))
+
+
+class TestMatcherOnnx:
+    def test_runs_real_graph(self, tiny_stereo_graph):
+        m = StereoMatcher(tiny_stereo_graph, threads=1)
+        assert m.input_size == (64, 64) and m.iters == 2
+        rng = np.random.default_rng(0)
+        left = (rng.random((96, 128, 3)) * 255).astype(np.uint8)
+        res = m.match(left, np.roll(left, -4, axis=1))
+        assert res.disparity.shape == (96, 128) and np.all(np.isfinite(res.disparity))
+        assert np.all(res.disparity >= 0)
+
+    def test_refuses_other_kind(self, tiny_stereo_graph, tmp_path):
+        onnx = pytest.importorskip("onnx")
+        from spacepose.onnx_session import write_metadata
+
+        model = onnx.load(str(tiny_stereo_graph))
+        write_metadata(model, {"kind": "pose", "input_size": [64, 64], "iters": 2})
+        path = tmp_path / "wrong.onnx"
+        onnx.save(model, str(path))
+        with pytest.raises(BundleError, match="kind"):
+            StereoMatcher(path)

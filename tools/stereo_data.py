@@ -1,0 +1,203 @@
+"""Training samples for TSCA-Stereo from a rendered dataset (layout of CONVENTIONS.md).
+
+Every sample is one fixed-size view (default 256x256) of a 640x480 frame pair, made with the same
+geometry as the flight runtime (``spacepose.roi``):
+
+* with probability ``roi_prob`` (~0.75) a square ROI window around the target — the mask box ∪ the
+  box shifted by ``-d`` (its copy in the right image), random margin 1.05–1.6 and centre jitter, so
+  the scale ``s = size / side`` varies from sample to sample;
+* otherwise the whole frame letterboxed (the runtime's coarse pass).
+
+Ground-truth disparity is resampled with nearest neighbour and multiplied by ``s``;
+``valid = mask & d > 0`` after resampling. Photometric augmentation (train only): per-image
+(asymmetric) brightness, contrast and gamma, Gaussian noise, and occasional conversion to grey.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacepose import roi
+from spacepose.errors import DatasetError
+from spacepose.imageio import read_image, read_pfm
+
+log = logging.getLogger(__name__)
+
+__all__ = ["FrameRecord", "read_labels", "StereoCropConfig", "StereoCropDataset", "photometric_augment"]
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """One labelled frame of a dataset."""
+
+    frame: str
+    split: str
+    regime: str
+    distance_m: float
+
+
+def read_labels(root: str | Path, split: str | None = None) -> list[FrameRecord]:
+    """Frames of ``labels.jsonl`` (optionally of one split), in file order."""
+    path = Path(root) / "labels.jsonl"
+    if not path.is_file():
+        raise DatasetError(f"{root}: no labels.jsonl")
+    records = []
+    with open(path, encoding="utf-8") as fh:
+        for lineno, line in enumerate(fh, 1):
+            if not line.strip():
+                continue
+            try:
+                obj = json.loads(line)
+                rec = FrameRecord(str(obj["frame"]), str(obj.get("split", "train")), str(obj.get("regime", "unknown")),
+                                  float(obj["t"][2]) if "t" in obj else float("nan"))
+            except (json.JSONDecodeError, KeyError, TypeError, ValueError, IndexError) as err:
+                raise DatasetError(f"{path}:{lineno}: bad label line: {err}") from err
+            if split is None or rec.split == split:
+                records.append(rec)
+    return records
+
+
+@dataclass(frozen=True)
+class StereoCropConfig:
+    """How samples are cut (serialised into the training config)."""
+
+    size: tuple[int, int] = (256, 256)
+    roi_prob: float = 0.75
+    margin_range: tuple[float, float] = (1.05, 1.6)
+    jitter: float = 0.1
+    min_side: int = 32
+    max_disp: float = 96.0
+    augment: bool = True
+    grey_prob: float = 0.1
+    noise_sigma_max: float = 4.0
+
+
+def photometric_augment(image: np.ndarray, rng: np.random.Generator, noise_sigma_max: float = 4.0) -> np.ndarray:
+    """Brightness/contrast/gamma jitter + Gaussian noise on an (H, W, 3) float32 image in [0, 255]."""
+    x = image / 255.0
+    gamma = rng.uniform(0.8, 1.25)
+    x = np.power(np.clip(x, 0.0, 1.0), gamma)
+    contrast = rng.uniform(0.8, 1.2)
+    brightness = rng.uniform(0.8, 1.2)
+    mean = float(x.mean())
+    x = (x - mean) * contrast + mean
+    x = x * brightness + rng.uniform(-0.03, 0.03)
+    x = x * 255.0
+    sigma = rng.uniform(0.0, noise_sigma_max)
+    if sigma > 0:
+        x = x + rng.normal(0.0, sigma, size=x.shape)
+    return np.clip(x, 0.0, 255.0).astype(np.float32)
+
+
+def _to_rgb_float(image: np.ndarray) -> np.ndarray:
+    if image.dtype == np.uint16:
+        image = (image.astype(np.float32) * (255.0 / 65535.0))
+    x = image.astype(np.float32)
+    if x.ndim == 2:
+        x = np.repeat(x[..., None], 3, axis=2)
+    return x
+
+
+class StereoCropDataset:
+    """A ``torch.utils.data.Dataset`` of fixed-size stereo samples (see the module docstring).
+
+    Items are dicts: ``left``, ``right`` (3, H, W) float32 tensors in [0, 255]; ``disparity`` (1, H, W)
+    float32 net pixels; ``valid`` (1, H, W) float32 0/1; ``scale`` (float, net px per frame px);
+    ``kind`` ("roi" | "letterbox"); ``regime``; ``distance`` (metres); ``frame``.
+
+    Randomness is a pure function of (seed, epoch, index): call :meth:`set_epoch` each epoch.
+    With ``augment=False`` and ``deterministic=True`` (validation) samples are fixed ROI windows.
+    """
+
+    def __init__(self, root: str | Path, split: str = "train", config: StereoCropConfig = StereoCropConfig(),
+                 *, seed: int = 0, limit: int | None = None, deterministic: bool = False) -> None:
+        self.root = Path(root)
+        self.config = config
+        self.seed = int(seed)
+        self.epoch = 0
+        self.deterministic = bool(deterministic)
+        self.records = read_labels(self.root, split)
+        if limit is not None:
+            self.records = self.records[: int(limit)]
+        if not self.records:
+            raise DatasetError(f"{self.root}: no frames in split {split!r}")
+
+    def __len__(self) -> int:
+        return len(self.records)
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def load_frame(self, rec: FrameRecord) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(left RGB, right RGB, disparity float32, mask bool) of one frame at full resolution."""
+        left = read_image(self.root / "left" / f"{rec.frame}.png")
+        right = read_image(self.root / "right" / f"{rec.frame}.png")
+        disp = read_pfm(self.root / "disparity" / f"{rec.frame}.pfm")
+        mask = read_image(self.root / "mask" / f"{rec.frame}.png")
+        if mask.ndim == 3:
+            mask = mask[..., 0]
+        disp = np.nan_to_num(disp.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        if left.shape[:2] != disp.shape or right.shape[:2] != disp.shape or mask.shape != disp.shape:
+            raise DatasetError(f"{rec.frame}: left/right/disparity/mask sizes differ")
+        return left, right, disp, mask > 0
+
+    def make_view(self, left: np.ndarray, right: np.ndarray, disp: np.ndarray, mask: np.ndarray,
+                  rng: np.random.Generator | None) -> dict[str, Any]:
+        """Cut one sample (numpy) out of a frame; ``rng=None`` gives the deterministic ROI view."""
+        cfg = self.config
+        target = mask & (disp > 0)
+        bbox = roi.bbox_from_mask(target)
+        use_roi = bbox is not None and (rng is None or rng.random() < cfg.roi_prob)
+        if use_roi:
+            d_vals = disp[target]
+            d_min, d_max = float(d_vals.min()), float(d_vals.max())
+            if rng is None:
+                margin, jitter = 0.5 * sum(cfg.margin_range), (0.0, 0.0)
+            else:
+                margin = float(rng.uniform(*cfg.margin_range))
+                jitter = (float(rng.uniform(-cfg.jitter, cfg.jitter)), float(rng.uniform(-cfg.jitter, cfg.jitter)))
+            window = roi.square_window(bbox, d_min, d_max, margin, center_jitter=jitter, min_side=cfg.min_side,
+                                       out_side=cfg.size[0], max_disp=cfg.max_disp)
+            t = roi.window_transform(window, cfg.size)
+            kind = "roi"
+        else:
+            t = roi.letterbox_transform((left.shape[1], left.shape[0]), cfg.size)
+            kind = "letterbox"
+        lv = roi.warp_to_net(_to_rgb_float(left), t)
+        rv = roi.warp_to_net(_to_rgb_float(right), t)
+        dv = roi.warp_to_net(disp, t, nearest=True) * np.float32(t.scale)
+        mv = roi.warp_to_net(target.astype(np.uint8), t, nearest=True) > 0
+        valid = mv & (dv > 0) & (dv < cfg.max_disp)
+        if rng is not None and cfg.augment:
+            lv = photometric_augment(lv, rng, cfg.noise_sigma_max)
+            rv = photometric_augment(rv, rng, cfg.noise_sigma_max)
+            if rng.random() < cfg.grey_prob:
+                lv = np.repeat(lv.mean(axis=2, keepdims=True), 3, axis=2)
+                rv = np.repeat(rv.mean(axis=2, keepdims=True), 3, axis=2)
+        return {"left": lv, "right": rv, "disparity": dv.astype(np.float32), "valid": valid,
+                "scale": float(t.scale), "kind": kind}
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        import torch
+
+        rec = self.records[index]
+        left, right, disp, mask = self.load_frame(rec)
+        rng = None if self.deterministic else np.random.default_rng([self.seed, self.epoch, int(index)])
+        view = self.make_view(left, right, disp, mask, rng)
+        return {
+            "left": torch.from_numpy(np.ascontiguousarray(view["left"].transpose(2, 0, 1), dtype=np.float32)),
+            "right": torch.from_numpy(np.ascontiguousarray(view["right"].transpose(2, 0, 1), dtype=np.float32)),
+            "disparity": torch.from_numpy(view["disparity"][None].copy()),
+            "valid": torch.from_numpy(view["valid"][None].astype(np.float32)),
+            "scale": float(view["scale"]),
+            "kind": view["kind"],
+            "regime": rec.regime,
+            "distance": rec.distance_m,
+            "frame": rec.frame,
+        }
