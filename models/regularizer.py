@@ -90,15 +90,20 @@ class Regularizer(nn.Module):
         use_dwsep: bool,
         use_seca: bool,
         depthwise_qk: bool = False,
+        seca_quarter_res: bool = True,
     ) -> None:
-        """widths: (c0, c1, c2, c3) at 1/4 .. 1/32; feature_widths: image features at 1/4 .. 1/32."""
+        """widths: (c0, c1, c2, c3) at 1/4 .. 1/32; feature_widths: image features at 1/4 .. 1/32.
+
+        seca_quarter_res=False keeps the baseline aggregation in the 1/4 decoder block (CPU cost)."""
         super().__init__()
         c = widths
         self.stem = nn.Sequential(conv3d_block(groups, c[0]), conv3d_block(c[0], c[0]))
         self.encoders = nn.ModuleList(
             [EncoderBlock(c[j - 1], c[j], use_dwsep, use_seca, depthwise_qk) for j in (1, 2, 3)]
         )
-        self.decoders = nn.ModuleList([DecoderBlock(c[j + 1], c[j], use_seca, depthwise_qk) for j in (2, 1, 0)])
+        self.decoders = nn.ModuleList(
+            [DecoderBlock(c[j + 1], c[j], use_seca and (j > 0 or seca_quarter_res), depthwise_qk) for j in (2, 1, 0)]
+        )
         self.enc_excite = nn.ModuleList([FeatureExcitation(feature_widths[j], c[j]) for j in range(4)])
         self.dec_excite = nn.ModuleList([FeatureExcitation(feature_widths[j], c[j]) for j in (2, 1, 0)])
         self.classifier = nn.Conv3d(c[0], 1, 3, padding=1)

@@ -36,6 +36,8 @@ class StereoConfig:
     hidden_dims: ConvGRU hidden channels per level (1/4, 1/8, 1/16); first n_gru_layers are used.
     reg_widths: 3D regulariser channels at 1/4 (= geometry encoding volume channels), 1/8, 1/16, 1/32.
     seca_depthwise_qk: make SECA's 3x3x3 / 5x5x5 query/key convs depthwise (a CPU-cost knob).
+    seca_quarter_res: SECA also in the 1/4-resolution decoder block (paper: yes; the CPU model
+        uses the baseline 1x1x1 + 3x3x3 aggregation there, SECA costs ~0.5 s at 1/4 in torch eager).
 
     The defaults are the CPU model (``cpu()``): 3D widths are multiples of 16 because torch's
     CPU Conv3d is 3-5x slower per MAC with fewer input channels; the finest GRU is kept narrow
@@ -52,6 +54,7 @@ class StereoConfig:
     groups: int = 16
     reg_widths: tuple[int, ...] = (16, 16, 32, 32)
     seca_depthwise_qk: bool = True
+    seca_quarter_res: bool = False
     corr_levels: int = 2
     corr_radius: int = 4
     max_disp: int = 96
@@ -135,6 +138,7 @@ class StereoConfig:
             groups=8,
             reg_widths=(8, 16, 32, 48),
             seca_depthwise_qk=False,
+            seca_quarter_res=True,
             corr_levels=2,
             corr_radius=4,
             max_disp=192,

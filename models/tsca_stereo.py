@@ -44,7 +44,8 @@ class TSCAStereo(nn.Module):
         self.features = FeatureNetwork(cfg.feature_widths, cfg.match_dim)
         self.context = ContextNetwork(cfg)
         self.regularizer = Regularizer(
-            cfg.groups, cfg.reg_widths, cfg.feature_widths[1:], cfg.use_dwsep, cfg.use_seca, cfg.seca_depthwise_qk
+            cfg.groups, cfg.reg_widths, cfg.feature_widths[1:], cfg.use_dwsep, cfg.use_seca,
+            cfg.seca_depthwise_qk, cfg.seca_quarter_res,
         )
         self.init_mask = UpsampleMaskHead(cfg.feature_widths[1], FACTOR)
         self.update = MultiLevelUpdate(cfg, FACTOR)

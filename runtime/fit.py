@@ -28,10 +28,10 @@ _NUMERIC = (np.floating, np.integer)
 
 def _check_array(array: object, shape: tuple[int | None, ...], name: str) -> np.ndarray:
     """``check_shape`` plus a real-number (float or int, not bool/complex) dtype check."""
-    check_shape(array, shape, name)
-    if not any(np.issubdtype(array.dtype, d) for d in _NUMERIC):  # type: ignore[union-attr]
-        raise ShapeError(f"{name} must have a float or integer dtype, got {array.dtype}")  # type: ignore[union-attr]
-    return array  # type: ignore[return-value]
+    checked = check_shape(array, shape, name)
+    if not any(np.issubdtype(checked.dtype, d) for d in _NUMERIC):
+        raise ShapeError(f"{name} must have a float or integer dtype, got {checked.dtype}")
+    return checked
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ __all__ = [
     "current_rss_bytes",
     "summarize_timings",
     "check_budget",
+    "budget_to_dict",
 ]
 
 logger = logging.getLogger(__name__)

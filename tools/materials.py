@@ -208,7 +208,7 @@ def sample_materials(pmap: PartMaterialMap, rng: np.random.Generator) -> Materia
         f0=f0.astype(np.float32),
         roughness=rough.astype(np.float32),
         crinkle=crinkle.astype(np.float32),
-        crinkle_cell=float(rng.uniform(0.03, 0.1)),
+        crinkle_cell=float(rng.uniform(0.08, 0.25)),
         cell_size=float(rng.uniform(0.06, 0.16)),
         grid_albedo=np.full(3, back_alb, dtype=np.float32) * np.array([1.0, 1.0, 0.97], dtype=np.float32),
         summary=summary,

@@ -494,6 +494,32 @@ def _hash3(cells: np.ndarray, salt: int) -> np.ndarray:
     return out
 
 
+def _value_noise3(x: np.ndarray, salt: int) -> np.ndarray:
+    """(N,3) smooth vector noise in [-1, 1]: trilinear interpolation of hashed lattice vectors."""
+    base = np.floor(x)
+    f = x - base
+    f = f * f * (3.0 - 2.0 * f)  # smoothstep: continuous normals, no facet edges
+    cells = base.astype(np.int64)
+    out = np.zeros_like(x)
+    for corner in range(8):
+        off = np.array([(corner >> 0) & 1, (corner >> 1) & 1, (corner >> 2) & 1])
+        w = np.prod(np.where(off[None, :] == 1, f, 1.0 - f), axis=1)
+        out += w[:, None] * (_hash3(cells + off[None, :], salt) * 2.0 - 1.0)
+    return out
+
+
+def _line_coverage(x: np.ndarray, width: float, footprint: np.ndarray) -> np.ndarray:
+    """Fraction of a pixel footprint (in period units) covered by lines of ``width`` centred on integers."""
+
+    def integral(y):  # integral of the periodic indicator of [0, width)
+        fl = np.floor(y)
+        return fl * width + np.minimum(y - fl, width)
+
+    h = np.maximum(footprint, 1e-4) * 0.5
+    y = x + width * 0.5
+    return np.clip((integral(y + h) - integral(y - h)) / (2 * h), 0.0, 1.0)
+
+
 def _ggx_specular(n, v, l, nl, nv, alpha, f0):
     hvec = v + l
     hvec /= np.maximum(np.linalg.norm(hvec, axis=1, keepdims=True), 1e-9)
@@ -508,7 +534,7 @@ def _ggx_specular(n, v, l, nl, nv, alpha, f0):
     return fres * (D * G / (4.0 * nl * nv + 1e-6))[:, None]
 
 
-def _shade(scene_bvh, target, frame: Scene, hits: _Hits) -> np.ndarray:
+def _shade(scene_bvh, target, frame: Scene, hits: _Hits, fx: float) -> np.ndarray:
     """(N,3) linear radiance of the hit points."""
     n_hits = len(hits.face)
     if n_hits == 0:
@@ -532,9 +558,9 @@ def _shade(scene_bvh, target, frame: Scene, hits: _Hits) -> np.ndarray:
     crinkle = mats.crinkle[part]
     is_mli = (fclass == MLI) & (crinkle > 0)
     if np.any(is_mli):
-        cells = np.floor(hits.point[is_mli] / mats.crinkle_cell).astype(np.int64)
-        tilt = (_hash3(cells, 17) - 0.5) * 2.0 * crinkle[is_mli, None]
-        nm = n[is_mli] + tilt
+        p_mli = hits.point[is_mli]
+        tilt = _value_noise3(p_mli / mats.crinkle_cell, 17) + 0.5 * _value_noise3(p_mli / (0.37 * mats.crinkle_cell), 29)
+        nm = n[is_mli] + tilt * crinkle[is_mli, None]
         nm /= np.linalg.norm(nm, axis=1, keepdims=True)
         n[is_mli] = nm
     # solar cells: grid of cells with metallic interconnect gaps in the part's own plane
@@ -542,13 +568,17 @@ def _shade(scene_bvh, target, frame: Scene, hits: _Hits) -> np.ndarray:
     if np.any(is_cell):
         axes = st.part_axes[part[is_cell]]
         p = hits.point[is_cell]
+        # pixel footprint on the surface (m), to box-filter the sub-pixel gap lines (no aliasing)
+        footprint = hits.depth[is_cell].astype(np.float64) / fx
         cu = np.einsum("ij,ij->i", p, axes[:, 0]) / mats.cell_size
         cv = np.einsum("ij,ij->i", p, axes[:, 1]) / (mats.cell_size * 0.7)
-        gap = (np.abs(cu - np.round(cu)) < 0.05) | (np.abs(cv - np.round(cv)) < 0.06)
-        idx = np.flatnonzero(is_cell)[gap]
-        albedo[idx] = mats.grid_albedo * 0.6
-        f0[idx] = 0.6
-        rough[idx] = 0.35
+        gu = _line_coverage(cu, 0.08, footprint / mats.cell_size)
+        gv = _line_coverage(cv, 0.1, footprint / (mats.cell_size * 0.7))
+        gap = (1.0 - (1.0 - gu) * (1.0 - gv))[:, None]
+        idx = np.flatnonzero(is_cell)
+        albedo[idx] = albedo[idx] * (1 - gap) + mats.grid_albedo * 0.6 * gap
+        f0[idx] = f0[idx] * (1 - gap) + 0.6 * gap
+        rough[idx] = rough[idx] * (1 - gap[:, 0]) + 0.35 * gap[:, 0]
     is_back = fclass == SOLAR_BACK
     if np.any(is_back):
         albedo[is_back] = mats.grid_albedo
@@ -614,13 +644,8 @@ def _background(camera: StereoCamera, frame: Scene) -> np.ndarray:
     out = np.zeros((h * w, 3), dtype=np.float32)
     if not frame.earth_visible:
         return out.reshape(h, w, 3)
-    K = camera.K
-    xs = (np.arange(w) - K[0, 2]) / K[0, 0]
-    ys = (np.arange(h) - K[1, 2]) / K[1, 1]
-    gx, gy = np.meshgrid(xs, ys)
-    d = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)], axis=1)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    e = frame.earth_dir
+    d = _pixel_directions(camera)
+    e = frame.earth_dir.astype(np.float32)
     rho = frame.earth_angular_radius
     cos_ang = d @ e
     glow_ang = rho + math.radians(1.2) * max(rho / 0.5, 0.3)
@@ -643,12 +668,11 @@ def _background(camera: StereoCamera, frame: Scene) -> np.ndarray:
         normal /= np.linalg.norm(normal, axis=1, keepdims=True)
         mu_s = normal @ s_dir
         mu_v = np.clip(-np.einsum("ij,ij->i", normal, dn[idx]), 0.0, 1.0)
-        local = normal @ frame.earth_rotation.T
-        lat = np.arcsin(np.clip(local[:, 2], -1, 1))
-        lon = np.arctan2(local[:, 1], local[:, 0])
-        land = (np.sin(3 * lon + 1.3) * np.cos(2 * lat) + 0.5 * np.sin(7 * lon - 2 * lat) + 0.35 * np.sin(11 * lat + 5 * lon)) > 0.55
-        cloud = 0.5 + 0.5 * np.sin(13 * lon + 4 * np.sin(9 * lat)) * np.cos(17 * lat - 3 * lon)
-        cloud = np.clip((cloud - 0.45) * 2.5, 0, 1) * 0.85
+        # procedural continents and cloud bands: sums of plane waves on the unit sphere
+        local = (normal @ (frame.earth_rotation.T * _WAVES_SCALE)).astype(np.float32)  # (N,3) scaled
+        land = (np.sin(local @ _LAND_WAVES[0]) + np.sin(local @ _LAND_WAVES[1]) * 0.7 + np.sin(local @ _LAND_WAVES[2]) * 0.4) > 0.6
+        cloud = np.sin(local @ _CLOUD_WAVES[0] + 2.0 * np.sin(local @ _CLOUD_WAVES[1])) * np.sin(local @ _CLOUD_WAVES[2])
+        cloud = np.clip((cloud - 0.1) * 2.0, 0, 1) * 0.85
         base = np.where(land[:, None], np.array([0.16, 0.14, 0.08]), np.array([0.02, 0.05, 0.11]))
         alb = base * (1 - cloud[:, None]) + 0.75 * cloud[:, None]
         day = np.clip(mu_s, 0.0, 1.0)
@@ -666,6 +690,28 @@ def _background(camera: StereoCamera, frame: Scene) -> np.ndarray:
         sunlit = np.clip(perp @ s_dir + 0.2, 0.0, 1.0)
         out[near[idx]] = (0.05 * g * sunlit)[:, None] * np.array([0.35, 0.55, 1.0])[None, :] * sun[None, :]
     return out.reshape(h, w, 3)
+
+
+_WAVES_SCALE = 1.0
+_LAND_WAVES = (np.array([2.1, 1.3, -1.7], np.float32), np.array([-3.9, 4.4, 2.2], np.float32), np.array([6.5, -2.8, 7.9], np.float32))
+_CLOUD_WAVES = (np.array([1.5, 13.0, 3.0], np.float32), np.array([9.0, -2.0, 5.5], np.float32), np.array([-11.0, 4.0, 15.0], np.float32))
+
+
+@functools.lru_cache(maxsize=8)
+def _pixel_directions_cached(K_bytes: bytes, w: int, h: int) -> np.ndarray:
+    K = np.frombuffer(K_bytes, dtype=np.float64).reshape(3, 3)
+    xs = ((np.arange(w) - K[0, 2]) / K[0, 0]).astype(np.float32)
+    ys = ((np.arange(h) - K[1, 2]) / K[1, 1]).astype(np.float32)
+    gx, gy = np.meshgrid(xs, ys)
+    d = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size, np.float32)], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d.setflags(write=False)
+    return d
+
+
+def _pixel_directions(camera: StereoCamera) -> np.ndarray:
+    """(H*W, 3) float32 unit ray directions of the pixel centres (cached per camera)."""
+    return _pixel_directions_cached(np.ascontiguousarray(camera.K, dtype=np.float64).tobytes(), *camera.size)
 
 
 def _stars(camera: StereoCamera, frame: Scene) -> np.ndarray:
@@ -708,9 +754,19 @@ class StereoRender:
     exposure: float
 
 
-def _tone(linear: np.ndarray) -> np.ndarray:
-    x = np.clip(linear, 0.0, 1.0)
+@functools.lru_cache(maxsize=1)
+def _tone_lut() -> np.ndarray:
+    x = np.linspace(0.0, 1.0, _TONE_STEPS + 1)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(np.float32)
+
+
+_TONE_STEPS = 1 << 15
+
+
+def _tone(linear: np.ndarray) -> np.ndarray:
+    """sRGB transfer curve of linear values clipped to [0, 1] (sensor saturation), via a 2^15 LUT."""
+    idx = np.clip(linear * _TONE_STEPS + 0.5, 0, _TONE_STEPS).astype(np.int32)
+    return _tone_lut()[idx]
 
 
 def render_stereo(target, camera: StereoCamera, frame: Scene) -> StereoRender:
@@ -721,7 +777,7 @@ def render_stereo(target, camera: StereoCamera, frame: Scene) -> StereoRender:
     views = []
     for centre_x in (0.0, camera.baseline_m):
         hits = _cast_primary(bvh, camera, frame.R, frame.t, centre_x, radius)
-        views.append((hits, _shade(bvh, target, frame, hits)))
+        views.append((hits, _shade(bvh, target, frame, hits, camera.fx)))
     (hl, rad_l), (hr, rad_r) = views
 
     # auto exposure on the left target's luminance

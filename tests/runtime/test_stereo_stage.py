@@ -1,7 +1,6 @@
 import numpy as np
 import pytest
 
-from spacepose import roi
 from spacepose.errors import BundleError, ShapeError
 from spacepose.stereo_stage import RoiHint, StereoMatcher, to_net_input, validate_stereo_metadata
 

@@ -1,0 +1,66 @@
+import pytest
+
+torch = pytest.importorskip("torch")
+onnx = pytest.importorskip("onnx")
+
+from spacepose.errors import SpaceposeError  # noqa: E402
+from spacepose.export.metadata import stereo_metadata  # noqa: E402
+from spacepose.export.onnx_stereo import export_stereo, forbidden_ops, parity_check  # noqa: E402
+from spacepose.models.stereo_config import StereoConfig  # noqa: E402
+from spacepose.models.tsca_stereo import TSCAStereo  # noqa: E402
+from spacepose.onnx_session import read_metadata  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    torch.manual_seed(0)
+    cfg = StereoConfig.cpu()
+    model = TSCAStereo(cfg).eval()
+    meta = stereo_metadata(input_size=(64, 32), iters=2, stereo_config=cfg.to_dict(), dataset={"seed": 7, "size": 10})
+    path = tmp_path_factory.mktemp("exp") / "stereo.onnx"
+    export_stereo(model, path, size=(64, 32), iters=2, metadata=meta)
+    return path, model, meta
+
+
+def test_single_file_no_forbidden_ops(exported):
+    path, _, _ = exported
+    assert sorted(p.name for p in path.parent.iterdir()) == ["stereo.onnx"]
+    proto = onnx.load(str(path))
+    assert forbidden_ops(proto) == set()
+    assert proto.opset_import[0].version == 17
+    shapes = {i.name: [d.dim_value for d in i.type.tensor_type.shape.dim] for i in proto.graph.input}
+    assert shapes == {"left": [1, 3, 32, 64], "right": [1, 3, 32, 64]}
+
+
+def test_metadata_roundtrip(exported):
+    path, _, meta = exported
+    got = read_metadata(path)
+    assert got["kind"] == "stereo" and got["input_size"] == [64, 32] and got["iters"] == 2
+    assert got["variant"] == "full" and got["max_disp"] == 96 and got["dataset"] == {"seed": 7, "size": 10}
+    assert "training_commit" in got and got["config"]["variant"] == "full"
+
+
+def test_parity_torch_vs_onnxruntime(exported):
+    path, model, _ = exported
+    diff = parity_check(model, path, size=(64, 32), iters=2)
+    assert diff < 1e-3
+
+
+def test_never_overwrites(exported):
+    path, model, meta = exported
+    with pytest.raises(SpaceposeError, match="exists"):
+        export_stereo(model, path, size=(64, 32), iters=2, metadata=meta)
+
+
+def test_rejects_bad_size(exported, tmp_path):
+    _, model, meta = exported
+    with pytest.raises(SpaceposeError, match="multiples of 32"):
+        export_stereo(model, tmp_path / "x.onnx", size=(60, 32), iters=2, metadata=meta)
+
+
+def test_forbidden_ops_detects_gridsample():
+    from onnx import helper
+
+    node = helper.make_node("GridSample", ["x", "g"], ["y"])
+    graph = helper.make_graph([node], "g", [], [])
+    assert forbidden_ops(helper.make_model(graph)) == {"GridSample"}

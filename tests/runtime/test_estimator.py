@@ -1,0 +1,199 @@
+"""Tests of spacepose.estimator.PoseEstimator with the tiny test bundle (plumbing, no trained net)."""
+
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # --import-mode=importlib: find the helpers
+from _bundle_fixtures import CENTRE, make_bundle, synthetic_pair  # noqa: E402
+
+from spacepose.bundle import load_bundle  # noqa: E402
+from spacepose.calibration.rig import StereoRig, paper_rig, save_rig  # noqa: E402
+from spacepose.errors import BundleError, ShapeError  # noqa: E402
+from spacepose.estimator import PoseEstimator, PoseResult, refine_icp, rotation_to_quaternion  # noqa: E402
+
+STAGES = ["validate", "rectify", "stereo", "points", "pose_inputs", "pose_net", "voting"]
+
+
+@pytest.fixture(scope="module")
+def bundle(tmp_path_factory):
+    return load_bundle(make_bundle(tmp_path_factory.mktemp("bundle") / "tiny"))
+
+
+@pytest.fixture()
+def estimator(bundle):
+    return PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1)
+
+
+def test_end_to_end_valid_pose(estimator):
+    left, right = synthetic_pair()
+    res = estimator.estimate(left, right)
+    assert isinstance(res, PoseResult)
+    assert res.valid and res.status == "ok" and res.detail == ""
+    # the tiny graphs vote for (cloud mean + model point): R = I, t = cloud mean - centre
+    np.testing.assert_allclose(res.R, np.eye(3), atol=1e-5)
+    assert res.t[2] > 0 and np.all(np.abs(res.t[:2]) < 1.0)
+    np.testing.assert_allclose(res.q_wxyz, [1, 0, 0, 0], atol=1e-5)
+    assert 0.0 < res.confidence <= 1.0
+    assert list(res.timings_ms) == STAGES
+    assert res.n_points > 32 and res.roi is not None
+    record = res.to_dict("000001.png")
+    assert record["frame"] == "000001.png" and record["valid"] is True
+    assert set(record) >= {"frame", "valid", "status", "R", "t", "q_wxyz", "confidence", "timings_ms"}
+
+
+def test_calib_from_file_and_grey_uint16(bundle, tmp_path):
+    save_rig(paper_rig(640, 480), tmp_path / "rig.yaml")
+    est = PoseEstimator(tmp_path / "rig.yaml", bundle=bundle.path, threads=1)
+    left, right = synthetic_pair(dtype=np.uint16, colour=False)
+    assert est.estimate(left, right).valid
+    left, right = synthetic_pair(colour=False)
+    assert est.estimate(left[..., None], right[..., None]).valid
+    left, right = synthetic_pair()
+    assert est.estimate(left.astype(np.float32), right.astype(np.float32)).valid
+
+
+def test_prior_skips_coarse_pass(estimator, monkeypatch):
+    hints = []
+    original = estimator.stereo.match
+
+    def spy(left, right, roi_hint=None):
+        hints.append(roi_hint)
+        return original(left, right, roi_hint=roi_hint)
+
+    monkeypatch.setattr(estimator.stereo, "match", spy)
+    left, right = synthetic_pair()
+    assert estimator.estimate(left, right).valid
+    estimator.estimate(left, right)
+    assert hints[0] is None and hints[1] is not None
+    d_min, d_max = hints[1].d_min, hints[1].d_max
+    assert 0 < d_min < d_max
+    estimator.reset()
+    estimator.estimate(left, right)
+    assert hints[2] is None
+    # an invalid frame drops the prior
+    estimator.estimate(np.zeros_like(left), np.zeros_like(right))
+    estimator.estimate(left, right)
+    assert hints[-1] is None
+
+
+def test_no_prior_option(bundle, monkeypatch):
+    est = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, use_prior=False)
+    left, right = synthetic_pair()
+    est.estimate(left, right)
+    assert est._roi_hint() is None
+
+
+class TestBadInput:
+    @pytest.mark.parametrize("make, detail", [
+        (lambda l, r: (l[..., :2], r[..., :2]), "shape"),
+        (lambda l, r: (l[None], r[None]), "shape"),
+        (lambda l, r: (l.astype(np.int32), r.astype(np.int32)), "dtype"),
+        (lambda l, r: (l, r[:, :-1]), "differ"),
+        (lambda l, r: (l, r.astype(np.uint16)), "differ"),
+        (lambda l, r: (l[:-2, :-2], r[:-2, :-2]), "calibration"),
+        (lambda l, r: (np.where(l > 0, np.nan, 0.0), r.astype(np.float64)), "NaN"),
+        (lambda l, r: (np.full_like(l, 255), np.full_like(r, 255)), "saturated"),
+    ])
+    def test_bad_input_status(self, estimator, make, detail):
+        left, right = make(*synthetic_pair())
+        res = estimator.estimate(left, right)
+        assert (res.valid, res.status, res.confidence) == (False, "bad_input", 0.0)
+        assert detail in res.detail
+        assert np.all(np.isnan(res.R)) and np.all(np.isnan(res.q_wxyz))
+        assert "validate" in res.timings_ms
+
+    def test_all_black_is_no_target(self, estimator):
+        left, right = synthetic_pair()
+        res = estimator.estimate(np.zeros_like(left), np.zeros_like(right))
+        assert (res.valid, res.status) == (False, "no_target")
+
+    def test_dim_frame_without_target_is_no_target(self, estimator):
+        left, right = synthetic_pair()
+        noise = np.random.default_rng(0).integers(0, 10, size=left.shape, dtype=np.uint8)
+        res = estimator.estimate(np.maximum(noise, 6), noise)  # below the fake graph's threshold
+        assert res.status == "no_target" and not res.valid
+
+    @pytest.mark.parametrize("left", [None, [[0]], "image"])
+    def test_not_an_array_raises(self, estimator, left):
+        _, right = synthetic_pair()
+        with pytest.raises(ShapeError):
+            estimator.estimate(left, right)
+
+
+def test_mismatched_calibration_refused(bundle):
+    base = paper_rig(640, 480)
+    rig = StereoRig(base.M1, base.D1, base.M2, base.D2, base.R, np.array([-0.05, 0.0, 0.0]), base.image_size)
+    with pytest.raises(BundleError, match="does not fit"):
+        PoseEstimator(rig, bundle=bundle, threads=1)
+
+
+def test_bad_calib_type(bundle):
+    with pytest.raises(TypeError):
+        PoseEstimator(42, bundle=bundle)
+
+
+def test_threads_share_one_estimator(estimator):
+    left, right = synthetic_pair()
+    results, errors = [], []
+
+    def work():
+        try:
+            for _ in range(2):
+                results.append(estimator.estimate(left, right))
+        except Exception as err:  # pragma: no cover - reported below
+            errors.append(err)
+
+    threads = [threading.Thread(target=work) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert len(results) == 6 and all(r.status in ("ok", "too_few_points", "no_target") for r in results)
+
+
+def test_quaternion_matches_rotation():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        w, x, y, z = (q := rng.normal(size=4)) / np.linalg.norm(q)
+        R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        expected = np.array([w, x, y, z]) * (1 if w >= 0 else -1)
+        np.testing.assert_allclose(rotation_to_quaternion(R), expected, atol=1e-9)
+    assert np.all(np.isnan(rotation_to_quaternion(np.full((3, 3), np.nan))))
+
+
+def test_refine_icp_recovers_small_offset():
+    rng = np.random.default_rng(0)
+    # a box surface: samples and normals on its six faces
+    pts, nrm = [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            p = rng.uniform(-1, 1, size=(150, 3)) * np.array([2.0, 1.5, 1.0])
+            p[:, axis] = sign * [2.0, 1.5, 1.0][axis]
+            n = np.zeros((150, 3))
+            n[:, axis] = sign
+            pts.append(p)
+            nrm.append(n)
+    model, normals = np.vstack(pts), np.vstack(nrm)
+    R_true, t_true = np.eye(3), np.array([0.0, 0.0, 20.0])
+    scene = model[model[:, 2] < 0] @ R_true.T + t_true  # the visible (camera-facing) side
+    angle = np.radians(2.0)
+    R0 = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    t0 = t_true + np.array([0.05, -0.05, 0.08])
+    R1, t1 = refine_icp(R0, t0, scene, model, normals, max_distance=0.5, iterations=10)
+    assert np.linalg.norm(t1 - t_true) < np.linalg.norm(t0 - t_true)
+
+
+def test_import_does_not_pull_torch():
+    code = ("import sys, spacepose.estimator, spacepose.cli_estimate, spacepose.cli_profile, spacepose.cli_demo; "
+            "bad = [m for m in ('torch', 'scipy', 'sklearn', 'trimesh') if m in sys.modules]; "
+            "print(bad); sys.exit(1 if bad else 0)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
