@@ -395,7 +395,9 @@ def _parse_pose(section: Any) -> PoseGraphConfig:
 def _parse_voting(section: Any) -> VotingConfig:
     if section is None:
         return VotingConfig()
-    data = _optional_fields(VotingConfig, section if isinstance(section, Mapping) else {"?": 0}, "voting")
+    if not isinstance(section, Mapping):
+        raise BundleError(f"bundle.json: voting must be an object, got {type(section).__name__}")
+    data = _optional_fields(VotingConfig, section, "voting")
     defaults = VotingConfig()
     values: dict[str, Any] = {}
     for name in VotingConfig.__dataclass_fields__:

@@ -81,8 +81,9 @@ def frame_stem(name: str) -> str:
 class Progress:
     """A one-line progress bar on a stream (no dependency); silent when ``total`` is 0."""
 
-    def __init__(self, total: int, stream: TextIO = sys.stderr, width: int = 30) -> None:
-        self.total, self.stream, self.width = total, stream, width
+    def __init__(self, total: int, stream: TextIO | None = None, width: int = 30) -> None:
+        self.total, self.width = total, width
+        self.stream = sys.stderr if stream is None else stream
         self.start = time.perf_counter()
 
     def update(self, done: int, note: str = "") -> None:

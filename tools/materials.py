@@ -6,11 +6,12 @@ along its principal axes, ``c`` = its area-weighted centroid):
 
 1. **MLI** (multi-layer insulation foil, the bus): ``|c| < 0.2 R`` and ``a >= 0.5 %`` (big parts
    in the bus core), or box-like big parts ``s3 / s1 > 0.5`` with ``a >= 2 %``.
-2. **SOLAR** (solar cells): flat plates ``s3 / s2 < 0.08`` with ``a >= 0.5 %`` outside the bus core.
+2. **SOLAR** (solar cells): flat rectangular plates outside the bus core: ``s3 / s2 < 0.08``,
+   2-D convex hull area / minimum-area bounding rectangle ``>= 0.82`` (a disc has 0.785), ``a >= 0.5 %``.
    Faces of such a part whose normal points against the part's normal axis (sign fixed by a
    constant generic direction, see :data:`_SIDE_REFERENCE`) are **SOLAR_BACK** (panel back side).
-3. **DISH** (painted antenna reflectors): curved shells ``s2 / s1 > 0.6``, ``0.08 <= s3 / s2 < 0.5``,
-   ``a >= 1 %``.
+3. **DISH** (painted antenna reflectors): round shells or discs ``s2 / s1 > 0.6``, ``s3 / s2 < 0.5``,
+   ``a >= 0.5 %`` (that are not SOLAR).
 4. **STRUCTURE** (booms, struts, instruments): everything else; each such part is bare metal or
    painted, decided per frame.
 
@@ -51,7 +52,8 @@ class PartMaterialMap:
     Attributes:
         part_class: (P,) int8 class of each part (SOLAR parts keep SOLAR here).
         face_class: (F,) int8 class of each face (SOLAR_BACK appears only here).
-        part_axes: (P, 3, 3) float32 principal axes of each part (rows: major, minor, normal).
+        part_axes: (P, 3, 3) float32 axes of each part (rows: major, minor, normal; for flat parts the
+            first two follow the minimum-area bounding rectangle's edges).
     """
 
     part_class: np.ndarray
@@ -119,11 +121,15 @@ def _assign_cached(target) -> PartMaterialMap:
         part_axes[part] = axes
         core = np.linalg.norm(centroid) < 0.2 * radius
         flat = s3 / max(s2, 1e-12)
+        rect = 0.0
+        if flat < 0.08:
+            rect, edges = _rectangularity(pts - centroid, axes[:2])
+            axes[:2] = edges  # solar-cell grids follow the plate's edges
         if (core and frac >= 0.005) or (s3 / max(s1, 1e-12) > 0.5 and frac >= 0.02):
             cls = MLI
-        elif flat < 0.08 and frac >= 0.005:
+        elif flat < 0.08 and rect >= 0.82 and frac >= 0.005:
             cls = SOLAR
-        elif s2 / max(s1, 1e-12) > 0.6 and 0.08 <= flat < 0.5 and frac >= 0.01:
+        elif s2 / max(s1, 1e-12) > 0.6 and flat < 0.5 and frac >= 0.005:
             cls = DISH
         else:
             cls = STRUCTURE
@@ -134,6 +140,28 @@ def _assign_cached(target) -> PartMaterialMap:
         else:
             face_class[faces] = cls
     return PartMaterialMap(part_class=part_class, face_class=face_class, part_axes=part_axes)
+
+
+def _rectangularity(points: np.ndarray, axes: np.ndarray) -> tuple[float, np.ndarray]:
+    """Fill of a flat part's minimum-area bounding rectangle by its 2-D convex hull, and that
+    rectangle's edge directions (2, 3) in object space (rectangle 1.0, disc 0.785)."""
+    import cv2
+    from scipy.spatial import ConvexHull, QhullError
+
+    uv = points @ axes.T
+    if len(uv) < 3:
+        return 0.0, axes
+    try:
+        hull_area = float(ConvexHull(uv).volume)
+    except QhullError:
+        return 0.0, axes
+    (_, _), (w, h), angle = cv2.minAreaRect(uv.astype(np.float32))
+    if w * h <= 0:
+        return 0.0, axes
+    a = np.deg2rad(angle)
+    e1 = np.cos(a) * axes[0] + np.sin(a) * axes[1]
+    e2 = -np.sin(a) * axes[0] + np.cos(a) * axes[1]
+    return hull_area / float(w * h), np.stack([e1, e2])
 
 
 _FOILS = {  # name: (F0 tint, probability)

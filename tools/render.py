@@ -59,6 +59,7 @@ __all__ = [
 REGIMES = ("sun", "albedo", "penumbra", "mixed")
 SUN_ANGULAR_RADIUS = math.radians(0.267)
 _EARTH_RADIUS_KM = 6371.0
+_SHADOW_OFFSET = 2e-3
 _FILL_COLOR = np.array([0.85, 0.92, 1.0])
 
 
@@ -472,7 +473,7 @@ def _occluded(scene, points: np.ndarray, normals: np.ndarray, direction: np.ndar
     """(N,) bool: does the mesh block the ray from each point (offset along its normal) along direction."""
     if len(points) == 0:
         return np.zeros(0, dtype=bool)
-    origins = (points + normals * 2e-3 + direction * 1e-3).astype(np.float32)
+    origins = (points + normals * _SHADOW_OFFSET + direction * 1e-3).astype(np.float32)
     dirs = np.broadcast_to(direction.astype(np.float32), origins.shape) if direction.ndim == 1 else direction.astype(np.float32)
     res = scene.run(origins, np.ascontiguousarray(dirs), query="OCCLUDED")
     return np.asarray(res) != -1

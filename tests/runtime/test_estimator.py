@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # --import-mode=importlib: find the helpers
-from _bundle_fixtures import CENTRE, make_bundle, synthetic_pair  # noqa: E402
+from _bundle_fixtures import make_bundle, synthetic_pair  # noqa: E402
 
 from spacepose.bundle import load_bundle  # noqa: E402
 from spacepose.calibration.rig import StereoRig, paper_rig, save_rig  # noqa: E402
