@@ -111,7 +111,7 @@ def pose_input_names(n_levels: int) -> list[str]:
     return names
 
 
-def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 1024) -> np.ndarray:
+def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 512) -> np.ndarray:
     """Indices (M, k) int64 of the k nearest ``ref`` points of each ``query`` point, nearest first.
 
     Brute force in float64, ``chunk`` query rows at a time (memory ``chunk * len(ref)``). Ties are
@@ -133,6 +133,9 @@ def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 1024) -
         qc = q[start:start + chunk]
         d2 = np.einsum("ij,ij->i", qc, qc)[:, None] + r2[None, :] - 2.0 * qc @ r.T
         np.maximum(d2, 0.0, out=d2)
+        if kk == 1:  # argmin: fast, and ties go to the first (lowest) index
+            out[start:start + chunk, 0] = np.argmin(d2, axis=1)
+            continue
         if kk < len(r):
             part = np.argpartition(d2, kk - 1, axis=1)[:, :kk]
         else:
@@ -205,7 +208,7 @@ def choose_from_pixels(pixels: np.ndarray, crop_size: tuple[int, int]) -> np.nda
     return v * w + u
 
 
-def pix2pt_indices(pixels: np.ndarray, crop_size: tuple[int, int], stride: int, chunk: int = 4096) -> np.ndarray:
+def pix2pt_indices(pixels: np.ndarray, crop_size: tuple[int, int], stride: int, chunk: int = 512) -> np.ndarray:
     """(Hf*Wf,) int64: for each pixel of the stride-``stride`` feature map, the nearest point in the image.
 
     ``pixels`` (N, 2) are the crop coordinates (u, v) of the points of one level; feature-map pixel

@@ -47,6 +47,26 @@ def rendered(request, camera):
     return _frames(request.param, camera)
 
 
+def _brute_force_depth(tris: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """Nearest hit parameter of rays from the origin along dirs (z = 1) over all triangles (Moller-Trumbore)."""
+    v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+    out = np.full(len(dirs), np.inf)
+    for i, d in enumerate(dirs):
+        p = np.cross(d, e2)
+        det = np.einsum("ij,ij->i", e1, p)
+        ok = np.abs(det) > 1e-12
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        s = -v0
+        u = np.einsum("ij,ij->i", s, p) * inv
+        q = np.cross(s, e1)
+        v = (q @ d) * inv
+        t = np.einsum("ij,ij->i", e2, q) * inv
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+        if np.any(hit):
+            out[i] = t[hit].min()
+    return out
+
+
 class TestStereoCamera:
     def test_paper_rig(self, camera):
         assert camera.size == SIZE
@@ -137,26 +157,20 @@ class TestRender:
 
     def test_depth_from_disparity_is_raycast_depth(self, rendered, camera):
         target, frames = rendered
-        import trimesh
-
-        exact = trimesh.ray.ray_triangle.RayMeshIntersector(target.mesh)  # independent, pure numpy
+        tris = target.mesh.triangles
         for scene, r in frames:
             depth = disparity_to_depth(r.disparity, camera.fx, camera.baseline_m)
             np.testing.assert_allclose(depth[r.mask], r.depth[r.mask], rtol=1e-5)
             assert np.all(r.depth[r.mask] > 10.0 - target.bounding_radius)
             ys, xs = np.nonzero(r.mask)
-            pick = np.random.default_rng(0).choice(len(xs), size=min(40, len(xs)), replace=False)
+            pick = np.random.default_rng(0).choice(len(xs), size=min(30, len(xs)), replace=False)
             dirs = np.stack([(xs[pick] - camera.K[0, 2]) / camera.fx, (ys[pick] - camera.K[1, 2]) / camera.fx, np.ones(len(pick))], 1)
-            origin = scene.R.T @ -scene.t
-            locs, ray_idx, _ = exact.intersects_location(np.tile(origin, (len(pick), 1)), dirs @ scene.R, multiple_hits=True)
-            z = (locs @ scene.R.T + scene.t)[:, 2]
-            nearest = np.full(len(pick), np.inf)
-            np.minimum.at(nearest, ray_idx, z)
-            np.testing.assert_allclose(r.depth[ys[pick], xs[pick]], nearest, rtol=1e-4, atol=1e-3)
+            z = _brute_force_depth(tris @ scene.R.T + scene.t, dirs)  # independent of embree
+            np.testing.assert_allclose(r.depth[ys[pick], xs[pick]], z, rtol=1e-4, atol=1e-3)
 
     def test_right_image_at_x_minus_d_reproduces_left(self, rendered):
         _, frames = rendered
-        medians = []
+        medians, close = [], []
         for _, r in frames:
             ys, xs = np.nonzero(r.mask)
             xr = xs - r.disparity[ys, xs]
@@ -170,8 +184,10 @@ class TestRender:
             diff = np.abs(sampled - r.left[ys[same], xs[same]]).max(axis=1)
             assert same.mean() > 0.3
             medians.append(np.median(diff))
-            assert np.mean(diff < 0.15) > 0.75  # view-dependent specular highlights differ, the rest matches
+            close.append(diff < 0.15)
+            assert np.mean(diff < 0.15) > 0.6  # view-dependent specular highlights differ, the rest matches
         assert np.median(medians) < 0.03
+        assert np.mean(np.concatenate(close)) > 0.8
 
     def test_background_identical_in_both_views(self, rendered):
         _, frames = rendered
@@ -184,7 +200,7 @@ class TestRender:
         for scene, r in frames:
             vals = r.left[r.mask].mean(axis=1)
             if scene.regime in ("sun", "mixed"):
-                assert vals.max() > 0.6 and np.percentile(vals, 10) < 0.25
+                assert vals.max() > 0.6 and np.percentile(vals, 5) < 0.3
             assert vals.std() > 0.03
 
     def test_deterministic(self, camera):

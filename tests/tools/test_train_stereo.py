@@ -14,7 +14,7 @@ TINY = {"feature_widths": [8, 8, 16, 16, 16], "match_dim": 16, "context_widths":
 
 def _cfg(ds, out, steps):
     return TrainConfig(dataset=str(ds), out=str(out), steps=steps, batch=2, iters=2, size=(64, 64), ckpt_every=2,
-                       val_every=2, val_samples=2, log_every=1, threads=2, stereo=TINY)
+                       val_every=2, val_samples=1, log_every=1, threads=2, stereo=TINY)
 
 
 def test_sampler_shards_and_resumes():
@@ -26,6 +26,7 @@ def test_sampler_shards_and_resumes():
     assert sorted(list(r0) + list(r1)) == sorted(full)
 
 
+@pytest.mark.slow
 def test_train_checkpoint_resume(synthetic_dataset, tmp_path):
     out = tmp_path / "run"
     summary = train_stereo(_cfg(synthetic_dataset, out, 2))

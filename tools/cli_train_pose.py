@@ -1,0 +1,76 @@
+"""``spacepose train-pose DATASET --out runs/pose --steps N --batch 8 --depth-source stereo|gt_noisy``.
+
+Adam with the paper's cyclic learning rate (1e-5 -> 1e-3 -> 1e-5, three cycles over the run).
+``--depth-source stereo`` (paper §4) needs ``DATASET/pred_disparity/*.pfm``; ``--stereo-graph
+BUNDLE_or_stereo.onnx`` predicts the missing ones first. CPU by default, the GPU when torch sees
+one; under ``torchrun`` (``WORLD_SIZE`` set) DDP, no flag needed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+HELP = "train the pose network (RGB + points + ECFT, FFB6D heads) on a rendered dataset; resumable"
+
+
+def _override(text: str) -> tuple[str, object]:
+    key, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"--net takes KEY=VALUE (JSON value), got {text!r}")
+    try:
+        return key, json.loads(value)
+    except json.JSONDecodeError:
+        return key, value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dataset", type=Path, help="dataset folder (CONVENTIONS layout)")
+    parser.add_argument("--out", type=Path, default=Path("runs/pose"), help="run folder (checkpoint, log, config)")
+    parser.add_argument("--steps", type=int, default=1000)
+    parser.add_argument("--batch", type=int, default=8, help="batch per process")
+    parser.add_argument("--depth-source", choices=("stereo", "gt_noisy"), default="stereo",
+                        help="stereo: cached predicted disparity (paper §4); gt_noisy: GT + stereo-like noise (bootstrap)")
+    parser.add_argument("--stereo-graph", type=Path, default=None,
+                        help="bundle folder or stereo.onnx: predict missing pred_disparity/*.pfm before training")
+    parser.add_argument("--fusion", choices=("both", "rgb2pt", "pt2rgb", "none"), default="both")
+    parser.add_argument("--attention", choices=("ecaa", "vanilla"), default="ecaa")
+    parser.add_argument("--preset", choices=("cpu", "paper"), default="cpu", help="network size")
+    parser.add_argument("--net", type=_override, action="append", default=[], metavar="KEY=VALUE",
+                        help="PoseNetConfig override, e.g. --net n_points=512 --net 'crop_size=[96,96]'")
+    parser.add_argument("--lr-min", type=float, default=1e-5)
+    parser.add_argument("--lr-max", type=float, default=1e-3)
+    parser.add_argument("--cycles", type=int, default=3)
+    parser.add_argument("--no-augment", action="store_true", help="no photometric augmentation")
+    parser.add_argument("--ckpt-every", type=int, default=200)
+    parser.add_argument("--val-every", type=int, default=200)
+    parser.add_argument("--val-samples", type=int, default=8)
+    parser.add_argument("--log-every", type=int, default=10)
+    parser.add_argument("--workers", type=int, default=1, help="DataLoader workers")
+    parser.add_argument("--threads", type=int, default=0, help="torch.set_num_threads (0: torch default)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--limit", type=int, default=None, help="use only the first N training frames")
+    parser.add_argument("--resume", action="store_true", help="continue OUT/last.pt")
+
+
+def run(args: argparse.Namespace) -> int:
+    from spacepose._optional import import_optional
+
+    import_optional("torch")
+    from spacepose.tools.train_pose import TrainPoseConfig, train_pose
+
+    if args.stereo_graph is not None:
+        from spacepose.tools.predict_disparity import predict_disparity
+
+        result = predict_disparity(args.dataset, args.stereo_graph, threads=max(args.threads, 1) if args.threads else 2)
+        print(f"predicted disparity: {result['written']} written, {result['skipped']} cached -> {result['dir']}")
+    cfg = TrainPoseConfig(dataset=str(args.dataset), out=str(args.out), steps=args.steps, batch=args.batch,
+                          depth_source=args.depth_source, fusion=args.fusion, attention=args.attention,
+                          preset=args.preset, net=dict(args.net), lr_min=args.lr_min, lr_max=args.lr_max,
+                          cycles=args.cycles, augment=not args.no_augment, ckpt_every=args.ckpt_every,
+                          val_every=args.val_every, val_samples=args.val_samples, log_every=args.log_every,
+                          workers=args.workers, threads=args.threads, seed=args.seed, limit=args.limit)
+    summary = train_pose(cfg, resume=args.resume)
+    print(json.dumps(summary, indent=2))
+    return 0

@@ -1,0 +1,323 @@
+"""Train the multimodal pose network (RGB CNN + point net + ECFT + FFB6D heads), paper §5.3.
+
+* samples: :class:`spacepose.tools.pose_data.PoseDataset` (stereo-predicted or noisy GT depth
+  through the flight preprocessing, per-point labels, photometric augmentation);
+* loss: :func:`spacepose.models.pose_loss.pose_loss`, eq. 26 with K1 = K2 = K3 = 1 (focal γ = 2 +
+  L1 offsets in units of ``xyz_scale``);
+* Adam with the paper's cyclic learning rate: linear 1e-5 -> 1e-3 -> 1e-5, three cycles over the
+  run (``torch.optim.lr_scheduler.CyclicLR``, triangular, step size ``steps / (2 * cycles)``);
+* ``OUT/last.pt`` every ``ckpt_every`` steps and at exit (atomic replace), resumable (model,
+  optimiser, scheduler, step, sampler position, RNG states); ``OUT/log.jsonl``; ``OUT/config.json``;
+* validation on a few deterministic test frames: loss parts, segmentation accuracy, and the pose
+  from the runtime voting stage (:func:`spacepose.pose_stage.solve_pose`) -> e_t, e_R;
+* CUDA when available, else CPU; ``torchrun`` (``WORLD_SIZE`` set) -> DDP.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import os
+import random
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from torch.utils.data import DataLoader
+
+from spacepose.errors import DatasetError, SpaceposeError
+from spacepose.models.pose_config import PoseNetConfig
+from spacepose.models.pose_loss import PoseLossConfig, pose_loss
+from spacepose.tools.pose_data import PoseDataConfig, PoseDataset
+from spacepose.tools.train_stereo import EpochSampler, git_commit
+
+log = logging.getLogger(__name__)
+
+__all__ = ["TrainPoseConfig", "train_pose", "build_model", "load_checkpoint", "model_from_checkpoint",
+           "cyclic_scheduler", "validate_pose"]
+
+CHECKPOINT_NAME = "last.pt"
+
+
+@dataclass(frozen=True)
+class TrainPoseConfig:
+    """Everything that defines a pose training run (saved as OUT/config.json and in checkpoints)."""
+
+    dataset: str
+    out: str
+    steps: int = 1000
+    batch: int = 8
+    depth_source: str = "gt_noisy"
+    fusion: str = "both"
+    attention: str = "ecaa"
+    preset: str = "cpu"                    # PoseNetConfig.cpu() or .paper()
+    net: dict[str, Any] = field(default_factory=dict)   # PoseNetConfig overrides
+    lr_min: float = 1e-5
+    lr_max: float = 1e-3
+    cycles: int = 3
+    clip: float = 10.0
+    augment: bool = True
+    ckpt_every: int = 200
+    log_every: int = 10
+    val_every: int = 200
+    val_samples: int = 8
+    workers: int = 1
+    threads: int = 0                       # torch.set_num_threads (0 = torch's default)
+    seed: int = 0
+    limit: int | None = None               # use only the first N training frames
+    radius_m: float | None = None          # target radius for the depth window (default: mesh)
+
+    def net_config(self) -> PoseNetConfig:
+        overrides = {k: tuple(v) if isinstance(v, list) else v for k, v in self.net.items()}
+        overrides.update(fusion=self.fusion, attention=self.attention)
+        return PoseNetConfig.paper(**overrides) if self.preset == "paper" else PoseNetConfig.cpu(**overrides)
+
+    def data_config(self, augment: bool = True) -> PoseDataConfig:
+        return PoseDataConfig(depth_source=self.depth_source, augment=augment and self.augment)
+
+
+def build_model(config: PoseNetConfig) -> torch.nn.Module:
+    from spacepose.models.pose_net import PoseNet
+
+    return PoseNet(config)
+
+
+def cyclic_scheduler(optimizer: torch.optim.Optimizer, steps: int, lr_min: float = 1e-5, lr_max: float = 1e-3,
+                     cycles: int = 3) -> torch.optim.lr_scheduler.CyclicLR:
+    """Paper §5.3: linear ``lr_min -> lr_max -> lr_min``, ``cycles`` times over ``steps`` steps."""
+    up = max(1, int(round(steps / (2.0 * max(cycles, 1)))))
+    return torch.optim.lr_scheduler.CyclicLR(optimizer, base_lr=lr_min, max_lr=lr_max, step_size_up=up,
+                                             step_size_down=up, mode="triangular", cycle_momentum=False)
+
+
+def _rng_state() -> dict[str, Any]:
+    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_rng_state(state: dict[str, Any]) -> None:
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["python"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+def _atomic_save(obj: Any, path: Path) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def load_checkpoint(path: str | Path, map_location: str = "cpu") -> dict[str, Any]:
+    """A pose training checkpoint (dict with model, optimizer, scheduler, step, configs, keypoints)."""
+    p = Path(path)
+    if not p.is_file():
+        raise SpaceposeError(f"checkpoint not found: {p}")
+    try:
+        ckpt = torch.load(p, map_location=map_location, weights_only=False)
+    except Exception as err:  # torch raises pickle/zip errors of many types
+        raise SpaceposeError(f"cannot read checkpoint {p}: {err}") from err
+    if not isinstance(ckpt, dict) or ckpt.get("kind") != "pose":
+        raise SpaceposeError(f"{p} is not a pose checkpoint (kind={ckpt.get('kind') if isinstance(ckpt, dict) else None!r})")
+    return ckpt
+
+
+def model_from_checkpoint(ckpt: dict[str, Any]) -> tuple[torch.nn.Module, PoseNetConfig]:
+    config = PoseNetConfig.from_dict(ckpt["net_config"])
+    model = build_model(config)
+    model.load_state_dict(ckpt["model"])
+    model.eval()
+    return model, config
+
+
+def _forward(net: torch.nn.Module, names: list[str], batch: dict[str, Any], device: torch.device):
+    return net(*[batch[n].to(device) for n in names])
+
+
+@torch.no_grad()
+def validate_pose(model: torch.nn.Module, dataset: PoseDataset, device: torch.device,
+                  loss_cfg: PoseLossConfig) -> dict[str, float]:
+    """Loss, segmentation accuracy and voted-pose errors (median e_t, e_R; valid share) on ``dataset``."""
+    from spacepose.bundle import VotingConfig
+    from spacepose.metrics import rotation_error_deg, translation_error
+    from spacepose.pose_stage import solve_pose
+
+    model.eval()
+    names = model.input_names
+    losses, accs, e_t, e_r, n_valid = [], [], [], [], 0
+    for i in range(len(dataset)):
+        s = dataset[i]
+        batch = {k: v[None] if isinstance(v, torch.Tensor) else v for k, v in s.items()}
+        seg, kp, ctr = _forward(model, names, batch, device)
+        loss, _ = pose_loss(seg, kp, ctr, batch["labels"].to(device), batch["kp_targets"].to(device),
+                            batch["ctr_targets"].to(device), loss_cfg)
+        losses.append(float(loss))
+        accs.append(float((seg.argmax(-1).cpu() == batch["labels"]).float().mean()))
+        stage = solve_pose(s["xyz"].double().numpy(), seg.cpu().numpy(), kp.cpu().numpy(), ctr.cpu().numpy(),
+                           dataset.keypoints, dataset.centre, config=VotingConfig(), diameter_m=2.0 * dataset.radius_m,
+                           distance_range_m=dataset.distance_range_m, focal_px=dataset.focal_px,
+                           baseline_m=dataset.baseline_m)
+        if stage.valid:
+            n_valid += 1
+            e_t.append(translation_error(s["t"].numpy(), stage.t))
+            e_r.append(rotation_error_deg(s["R"].numpy(), stage.R))
+    model.train()
+    nan = float("nan")
+    return {"val_loss": float(np.mean(losses)), "val_seg_acc": float(np.mean(accs)),
+            "val_valid": n_valid / max(len(dataset), 1),
+            "val_e_t_median": float(np.median(e_t)) if e_t else nan,
+            "val_e_R_median": float(np.median(e_r)) if e_r else nan}
+
+
+def _dist_setup() -> tuple[int, int, int]:
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world > 1 and not dist.is_initialized():
+        dist.init_process_group(backend="nccl" if torch.cuda.is_available() else "gloo")
+    rank = dist.get_rank() if dist.is_initialized() else 0
+    return rank, world if dist.is_initialized() else 1, int(os.environ.get("LOCAL_RANK", "0"))
+
+
+def _json(obj: Any) -> Any:
+    return json.loads(json.dumps(obj, default=list))
+
+
+def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
+    """Run (or resume) training; returns a summary (final step, last losses, checkpoint path)."""
+    rank, world, local_rank = _dist_setup()
+    if cfg.threads > 0:
+        torch.set_num_threads(cfg.threads)
+    device = torch.device(f"cuda:{local_rank}" if torch.cuda.is_available() else "cpu")
+    if device.type == "cuda":
+        torch.cuda.set_device(device)
+    out = Path(cfg.out)
+    ckpt_path = out / CHECKPOINT_NAME
+    if ckpt_path.exists() and not resume:
+        raise SpaceposeError(f"{ckpt_path} exists: pass --resume to continue it, or choose another --out")
+    if resume and not ckpt_path.exists():
+        raise SpaceposeError(f"--resume given but {ckpt_path} does not exist")
+    if rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+
+    net_cfg = cfg.net_config()
+    spec = net_cfg.input_spec(seed=cfg.seed)
+    loss_cfg = PoseLossConfig(offset_scale=net_cfg.xyz_scale)
+    train_set = PoseDataset(cfg.dataset, "train", spec, cfg.data_config(True), seed=cfg.seed, limit=cfg.limit,
+                            radius_m=cfg.radius_m)
+    if train_set.keypoints.shape[0] != net_cfg.n_keypoints:
+        raise SpaceposeError(f"the target has {train_set.keypoints.shape[0]} keypoints, the net predicts {net_cfg.n_keypoints}")
+    try:
+        val_set = PoseDataset(cfg.dataset, "test", spec, cfg.data_config(False), seed=cfg.seed, limit=cfg.val_samples,
+                              deterministic=True, keypoints=train_set.keypoints, centre=train_set.centre,
+                              radius_m=train_set.radius_m)
+    except DatasetError as err:
+        val_set = None
+        log.warning("validation disabled: %s", err)
+
+    torch.manual_seed(cfg.seed)
+    np.random.seed(cfg.seed)
+    random.seed(cfg.seed)
+    model = build_model(net_cfg).to(device)
+    model.train()
+    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr_min)
+    scheduler = cyclic_scheduler(optimizer, cfg.steps, cfg.lr_min, cfg.lr_max, cfg.cycles)
+    step = 0
+    if resume:
+        ckpt = load_checkpoint(ckpt_path, map_location=str(device))
+        saved = ckpt.get("train_config", {})
+        for key in ("preset", "net", "fusion", "attention", "batch", "depth_source"):
+            if key in saved and saved[key] != _json(getattr(cfg, key)):
+                raise SpaceposeError(f"cannot resume: {key} differs from the checkpoint ({saved[key]!r} vs {getattr(cfg, key)!r})")
+        model.load_state_dict(ckpt["model"])
+        optimizer.load_state_dict(ckpt["optimizer"])
+        scheduler.load_state_dict(ckpt["scheduler"])
+        step = int(ckpt["step"])
+        _set_rng_state(ckpt["rng"])
+        log.info("resumed %s at step %d", ckpt_path, step)
+
+    net = model
+    if world > 1:
+        net = torch.nn.parallel.DistributedDataParallel(model, device_ids=[local_rank] if device.type == "cuda" else None)
+    names = model.input_names
+    sampler = EpochSampler(len(train_set), cfg.seed, rank, world)
+    batches_per_epoch = max(sampler.per_rank() // cfg.batch, 1)
+    if sampler.per_rank() < cfg.batch:
+        raise SpaceposeError(f"batch {cfg.batch} exceeds the {sampler.per_rank()} training frames per rank")
+    info = train_set.info
+    dataset_doc = {"path": str(cfg.dataset), "seed": info.get("seed"), "size": info.get("count"),
+                   "train_frames": len(train_set), "target": train_set.target, "depth_source": cfg.depth_source,
+                   "distance_range_m": list(train_set.distance_range_m), "image_size": info.get("size")}
+    if rank == 0:
+        (out / "config.json").write_text(json.dumps(
+            {"train": dataclasses.asdict(cfg), "net": dataclasses.asdict(net_cfg), "loss": dataclasses.asdict(loss_cfg),
+             "data": dataclasses.asdict(cfg.data_config(True)), "world_size": world, "device": str(device),
+             "commit": git_commit(), "dataset": dataset_doc}, indent=2, default=list))
+    log_fh = open(out / "log.jsonl", "a", encoding="utf-8") if rank == 0 else None
+
+    def save() -> None:
+        if rank != 0:
+            return
+        _atomic_save({"kind": "pose", "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                      "scheduler": scheduler.state_dict(), "step": step, "rng": _rng_state(),
+                      "train_config": _json(dataclasses.asdict(cfg)), "net_config": _json(dataclasses.asdict(net_cfg)),
+                      "input_spec": _json(dataclasses.asdict(spec)), "keypoints": train_set.keypoints.tolist(),
+                      "centre": train_set.centre.tolist(), "target": train_set.target, "radius_m": train_set.radius_m,
+                      "rig": {"image_size": info.get("size"), "focal_px": train_set.focal_px,
+                              "baseline_m": train_set.baseline_m},
+                      "commit": git_commit(), "dataset": dataset_doc}, ckpt_path)
+
+    def write_log(entry: dict[str, Any]) -> None:
+        if log_fh is not None:
+            log_fh.write(json.dumps(entry) + "\n")
+            log_fh.flush()
+
+    last: dict[str, float] = {}
+    t_last = time.perf_counter()
+    try:
+        while step < cfg.steps:
+            epoch, pos = divmod(step, batches_per_epoch)
+            sampler.set_epoch(epoch, skip=pos * cfg.batch)
+            train_set.set_epoch(epoch)
+            loader = DataLoader(train_set, batch_size=cfg.batch, sampler=sampler, num_workers=cfg.workers,
+                                drop_last=True, persistent_workers=False)
+            for batch in loader:
+                seg, kp, ctr = _forward(net, names, batch, device)
+                loss, parts = pose_loss(seg, kp, ctr, batch["labels"].to(device), batch["kp_targets"].to(device),
+                                        batch["ctr_targets"].to(device), loss_cfg)
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
+                lr = scheduler.get_last_lr()[0]
+                optimizer.step()
+                scheduler.step()
+                step += 1
+                last = {"loss": float(loss.detach()), **{k: float(v.detach()) for k, v in parts.items()},
+                        "target_share": float((batch["labels"] > 0).float().mean())}
+                if step % cfg.log_every == 0 or step == cfg.steps:
+                    now = time.perf_counter()
+                    write_log({"step": step, **last, "grad_norm": float(grad_norm), "lr": lr,
+                               "s_per_step": (now - t_last) / cfg.log_every, "epoch": epoch})
+                    t_last = now
+                    log.info("step %d loss %.4f lr %.2e", step, last["loss"], lr)
+                if val_set is not None and rank == 0 and (step % cfg.val_every == 0 or step == cfg.steps):
+                    v = validate_pose(model, val_set, device, loss_cfg)
+                    write_log({"step": step, **v})
+                    last.update(v)
+                if step % cfg.ckpt_every == 0:
+                    save()
+                if step >= cfg.steps:
+                    break
+    finally:
+        save()
+        if log_fh is not None:
+            log_fh.close()
+        if world > 1 and dist.is_initialized():
+            dist.destroy_process_group()
+    return {"step": step, "checkpoint": str(ckpt_path), **last}
