@@ -78,6 +78,13 @@ class PoseNet(nn.Module):
     def input_names(self) -> list[str]:
         return pose_input_names(self.cfg.n_levels)
 
+    @property
+    def used_input_names(self) -> list[str]:
+        """Inputs this variant reads; ONNX export drops the others (``pix2pt_*`` when
+        ``fusion="none"`` or ``attention="vanilla"``), so feed a session only its declared inputs."""
+        reads_pix2pt = self.cfg.fusion in ("both", "pt2rgb") and self.cfg.attention == "ecaa"
+        return [n for n in self.input_names if reads_pix2pt or not n.startswith("pix2pt_")]
+
     output_names = ("seg_logits", "kp_offsets", "ctr_offsets")
 
     def forward_dict(self, inputs: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:

@@ -54,7 +54,7 @@ def test_joint_loss_weights_and_zero_at_targets():
         PoseLossConfig(gamma=-1.0)
 
 
-@pytest.fixture
+@pytest.fixture(autouse=True)
 def one_thread():
     """Tiny graphs run faster on one thread, and the CI machine is shared."""
     previous = torch.get_num_threads()
@@ -63,7 +63,7 @@ def one_thread():
     torch.set_num_threads(previous)
 
 
-def test_loss_falls_when_overfitting_one_sample(one_thread):
+def test_loss_falls_when_overfitting_one_sample():
     cfg = PoseNetConfig(crop_size=(64, 64), n_points=256, k=8, n_levels=2, rgb_stem=8, rgb_widths=(16, 32),
                         rgb_bottleneck=32, rgb_out=16, point_stem=8, point_widths=(16, 32), point_bottleneck=32,
                         head_width=32, n_keypoints=4)

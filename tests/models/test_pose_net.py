@@ -18,6 +18,15 @@ TINY = dict(crop_size=(64, 64), n_points=256, k=8, n_levels=2, rgb_stem=8, rgb_w
             rgb_out=16, point_stem=8, point_widths=(16, 32), point_bottleneck=32, head_width=32, n_keypoints=4)
 
 
+@pytest.fixture(autouse=True)
+def one_thread():
+    """Small graphs run faster on one thread, and the test machine is shared."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
+
+
 def _sample(cfg: PoseNetConfig, seed: int = 0) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
     w, h = cfg.crop_size
@@ -94,6 +103,7 @@ def test_configs():
         PoseNetConfig(rgb_widths=(32, 64))
 
 
+@pytest.mark.slow
 def test_onnx_export_matches_torch(tmp_path):
     ort = pytest.importorskip("onnxruntime")
     cfg = PoseNetConfig.cpu()
@@ -116,3 +126,18 @@ def test_onnx_export_matches_torch(tmp_path):
     got = session.run(list(net.output_names), inputs)
     for g, e in zip(got, expected):
         np.testing.assert_allclose(g, e.numpy(), atol=1e-4, rtol=0)
+
+
+@pytest.mark.parametrize("fusion, attention, reads_pix2pt",
+                         [("both", "ecaa", True), ("pt2rgb", "ecaa", True), ("rgb2pt", "ecaa", False),
+                          ("both", "vanilla", False), ("none", "ecaa", False)])
+def test_used_input_names(fusion, attention, reads_pix2pt):
+    """Only pix2pt_* can go unused; the traced graph's inputs are exactly used_input_names."""
+    net = PoseNet(PoseNetConfig(**TINY, fusion=fusion, attention=attention)).eval()
+    assert any(n.startswith("pix2pt_") for n in net.used_input_names) == reads_pix2pt
+    inputs = _sample(net.cfg)
+    args = tuple(torch.as_tensor(inputs[n]) for n in net.input_names)
+    with torch.no_grad():
+        graph = torch.jit.trace(net, args).graph
+    used = [name for name, value in zip(net.input_names, list(graph.inputs())[1:]) if value.uses()]
+    assert used == net.used_input_names

@@ -66,10 +66,18 @@ def test_cpu_model_size():
     assert 0.5e6 <= n <= 1.5e6
 
 
+def _tiny_cfg() -> StereoConfig:
+    """Narrow "full" model (~0.2 M params) so the overfit test stays within seconds."""
+    return _small_cfg().replace(
+        feature_widths=(8, 16, 16, 16, 16), match_dim=16, groups=4, context_widths=(16, 16, 16),
+        hidden_dims=(16, 16), motion_dim=16, reg_widths=(8, 8, 16, 16),
+    )
+
+
 @pytest.mark.slow
 def test_overfits_two_random_dot_pairs():
     torch.manual_seed(0)
-    cfg = _small_cfg()
+    cfg = _tiny_cfg()
     model = TSCAStereo(cfg)
     pairs = [_random_dot_pair(1, d0=5.0), _random_dot_pair(2, d0=3.0, slope=0.12)]
     left = torch.cat([p[0] for p in pairs])
@@ -88,3 +96,33 @@ def test_overfits_two_random_dot_pairs():
         opt.step()
         losses.append(loss.item())
     assert np.mean(losses[-5:]) < 0.5 * np.mean(losses[:3]), losses
+
+
+def test_onnx_export_matches_torch(tmp_path):
+    ort = pytest.importorskip("onnxruntime")
+    torch.manual_seed(0)
+    model = TSCAStereo(StereoConfig.cpu().replace(max_disp=32)).eval()
+
+    class Fixed(torch.nn.Module):
+        def __init__(self, net):
+            super().__init__()
+            self.net = net
+
+        def forward(self, left, right):
+            return self.net(left, right, iters=2, test_mode=True)
+
+    left, right, _ = _random_dot_pair(3, d0=4.0)
+    path = tmp_path / "stereo.onnx"
+    with torch.no_grad():
+        expected = Fixed(model)(left, right).numpy()
+        torch.onnx.export(
+            Fixed(model), (left, right), str(path), input_names=["left", "right"], output_names=["disparity"],
+            opset_version=17, dynamo=False,
+        )
+    import onnx
+
+    ops = {node.op_type for node in onnx.load(str(path)).graph.node}
+    assert not ops & {"GridSample", "ScatterND", "Unique"}, ops
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    got = sess.run(None, {"left": left.numpy(), "right": right.numpy()})[0]
+    np.testing.assert_allclose(got, expected, atol=1e-3, rtol=0)

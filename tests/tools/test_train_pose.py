@@ -1,0 +1,72 @@
+"""train_pose: a few steps on a tiny rendered dataset, checkpoint/resume, cyclic LR, CLI parsing."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+torch = pytest.importorskip("torch")
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # --import-mode=importlib: find the helpers
+from _pose_fixtures import pose_dataset, train_tiny  # noqa: E402
+
+from spacepose.errors import SpaceposeError  # noqa: E402
+from spacepose.tools.train_pose import (TrainPoseConfig, cyclic_scheduler, load_checkpoint,  # noqa: E402
+                                        model_from_checkpoint, train_pose)
+
+
+def test_cyclic_lr_three_cycles():
+    opt = torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))], lr=1e-5)
+    sched = cyclic_scheduler(opt, steps=60, lr_min=1e-5, lr_max=1e-3, cycles=3)
+    lrs = []
+    for _ in range(60):
+        lrs.append(sched.get_last_lr()[0])
+        opt.step()
+        sched.step()
+    assert lrs[0] == pytest.approx(1e-5)
+    peaks = [i for i in range(1, 59) if lrs[i] > lrs[i - 1] and lrs[i] > lrs[i + 1] or lrs[i] == pytest.approx(1e-3)]
+    assert peaks == [10, 30, 50]
+    assert max(lrs) == pytest.approx(1e-3) and lrs[20] == pytest.approx(1e-5) and lrs[40] == pytest.approx(1e-5)
+
+
+def test_train_resume_and_checkpoint(tmp_path_factory, tmp_path):
+    root = pose_dataset(tmp_path_factory)
+    out = tmp_path / "run"
+    ckpt_path = train_tiny(root, out, steps=2)
+    ckpt = load_checkpoint(ckpt_path)
+    assert ckpt["step"] == 2 and ckpt["kind"] == "pose" and len(ckpt["keypoints"]) == 8
+    assert {"model", "optimizer", "scheduler", "rng", "net_config", "input_spec", "dataset"} <= set(ckpt)
+    log = [json.loads(l) for l in (out / "log.jsonl").read_text().splitlines()]
+    assert [e["step"] for e in log if "loss" in e] == [1, 2]
+    assert all(e["loss"] == e["loss"] for e in log if "loss" in e)  # finite, not NaN
+    cfg_doc = json.loads((out / "config.json").read_text())
+    assert cfg_doc["train"]["depth_source"] == "gt_noisy" and cfg_doc["net"]["n_points"] == 128
+
+    # a second run into the same folder needs --resume; resuming continues the step count
+    with pytest.raises(SpaceposeError, match="resume"):
+        train_tiny(root, out, steps=3)
+    cfg = TrainPoseConfig(**{**json.loads((out / "config.json").read_text())["train"], "steps": 3})
+    summary = train_pose(cfg, resume=True)
+    assert summary["step"] == 3
+    assert load_checkpoint(ckpt_path)["step"] == 3
+    model, net_cfg = model_from_checkpoint(load_checkpoint(ckpt_path))
+    assert net_cfg.n_points == 128 and not model.training
+    with pytest.raises(SpaceposeError, match="differs"):
+        train_pose(TrainPoseConfig(**{**cfg.__dict__, "steps": 4, "fusion": "none"}), resume=True)
+
+
+def test_cli_arguments():
+    from spacepose.tools import cli_train_pose
+
+    parser = argparse.ArgumentParser()
+    cli_train_pose.add_arguments(parser)
+    args = parser.parse_args(["DS", "--steps", "5", "--depth-source", "gt_noisy", "--fusion", "rgb2pt",
+                              "--attention", "vanilla", "--net", "n_points=256", "--net", "crop_size=[64,64]", "--resume"])
+    assert args.steps == 5 and args.batch == 8 and args.workers == 1 and args.resume
+    assert dict(args.net) == {"n_points": 256, "crop_size": [64, 64]}
+    cfg = TrainPoseConfig(dataset="DS", out="o", net=dict(args.net), fusion=args.fusion, attention=args.attention)
+    net = cfg.net_config()
+    assert net.crop_size == (64, 64) and net.fusion == "rgb2pt" and net.attention == "vanilla"
