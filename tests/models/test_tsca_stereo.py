@@ -87,7 +87,7 @@ def test_overfits_two_random_dot_pairs():
     valid[..., :16] = False  # left border: no match in the right image
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3)
     losses = []
-    for _ in range(30):
+    for _ in range(20):
         init, preds = model(left, right)
         loss, _ = sequence_loss(init, preds, gt, valid, cfg.max_disp)
         opt.zero_grad()
@@ -95,7 +95,7 @@ def test_overfits_two_random_dot_pairs():
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
         opt.step()
         losses.append(loss.item())
-    assert np.mean(losses[-5:]) < 0.5 * np.mean(losses[:3]), losses
+    assert np.mean(losses[-3:]) < 0.4 * np.mean(losses[:3]), losses  # ~17 -> ~1.3 in practice
 
 
 def test_onnx_export_matches_torch(tmp_path):
