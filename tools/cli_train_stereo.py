@@ -31,6 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--iters", type=int, default=4, help="update iterations in training")
     parser.add_argument("--lr", type=float, default=4e-4)
     parser.add_argument("--size", type=_size, default=(256, 256), help="sample size WxH (the graph input)")
+    parser.add_argument("--train-crop", type=_size, default=None,
+                        help="random sub-crop WxH of each sample (cheaper steps; default: whole sample)")
     parser.add_argument("--ckpt-every", type=int, default=200)
     parser.add_argument("--val-every", type=int, default=200)
     parser.add_argument("--val-samples", type=int, default=8)
@@ -50,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = TrainConfig(dataset=str(args.dataset), out=str(args.out), steps=args.steps, batch=args.batch,
                       variant=args.variant, preset=args.preset, iters=args.iters, lr=args.lr, size=tuple(args.size),
+                      train_crop=tuple(args.train_crop) if args.train_crop else None,
                       ckpt_every=args.ckpt_every, val_every=args.val_every, val_samples=args.val_samples,
                       log_every=args.log_every, workers=args.workers, threads=args.threads, seed=args.seed,
                       limit=args.limit)

@@ -8,7 +8,8 @@ regime and per 10 m distance bin: mean and median e_t / e_R / ADD, mean SPEED sc
 fraction, and the count of valid frames with e_R > 90° ("flips", symmetric-looking targets).
 Also: an error-vs-confidence table (quantile bins of confidence), Fig. 14-style scatter plots
 (e_t and e_R against distance) and Fig. 15-style overlays (projected 3-D box; white = GT, green =
-estimate). ``baseline="classical"`` adds :func:`spacepose.tools.classical_pose.estimate_classical`.
+estimate). ``baseline="classical"`` adds :func:`spacepose.tools.classical_pose.estimate_classical`
+(SGBM + FPFH/RANSAC + ICP; needs Open3D, the ``[baseline]`` extra) on the rectified pair.
 """
 
 from __future__ import annotations
@@ -180,16 +181,20 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
     rig = load_rig(root / "rig.yaml")
     model = load_bundle(bundle)
     estimator = PoseEstimator(rig, bundle=model, threads=threads, use_prior=False, seed=seed)
-    K = rectify(rig).K
     pts = model_points(model.target_name, np.vstack([model.keypoints, model.bbox_corners]))
-    classical = None
-    target_obj = None
+    classical: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, bool]] | None = None
+    rect = rectify(rig)
+    K = rect.K
     if baseline == "classical":
-        from spacepose.tools.classical_pose import estimate_classical  # noqa: F401  (another helper's module)
+        from spacepose.tools.classical_pose import estimate_classical, model_cloud
         from spacepose.tools.targets import load_target
 
-        classical = estimate_classical
-        target_obj = load_target(model.target_name)
+        model_pts, model_normals = model_cloud(load_target(model.target_name), seed=seed)
+
+        def classical(left_img: np.ndarray, right_img: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+            lr, rr = (left_img, right_img) if rect.is_identity else rect.rectify_pair(left_img, right_img)
+            res = estimate_classical(lr, rr, rect.K, rect.baseline_m, model_pts, model_normals)
+            return np.asarray(res.R, dtype=np.float64), np.asarray(res.t, dtype=np.float64), bool(res.valid)
     elif baseline is not None:
         raise ValueError(f"unknown baseline {baseline!r} (choices: classical)")
     overlay_dir = Path(out_dir) / "overlays" if out_dir is not None and overlays > 0 else None
@@ -210,7 +215,7 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
                "R": np.asarray(result.R).tolist(), "t": np.asarray(result.t).tolist()}
         rows.append(row)
         if classical is not None:
-            R_c, t_c, valid_c = classical(left, right, rig, target_obj)
+            R_c, t_c, valid_c = classical(left, right)
             valid_c = bool(valid_c) and bool(np.all(np.isfinite(R_c))) and bool(np.all(np.isfinite(t_c)))
             err_c = _errors(rec.R, rec.t, np.asarray(R_c), np.asarray(t_c), pts) if valid_c else dict(nan_err)
             base_rows.append({"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "valid": valid_c,

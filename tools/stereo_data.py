@@ -76,6 +76,14 @@ class StereoCropConfig:
     augment: bool = True
     grey_prob: float = 0.1
     noise_sigma_max: float = 4.0
+    #: supervise background pixels with their true disparity 0 (sky, stars and the Earth are at
+    #: infinity for this rig): the coarse pass finds the target by thresholding disparity, so the
+    #: network must learn to output 0 off the target, not only to be right on it
+    supervise_background: bool = True
+    #: random sub-crop (w, h) of each training sample, containing the target centre when it can;
+    #: None trains on the whole graph-sized sample. Matching is translation invariant, so smaller
+    #: crops buy steps on a CPU without changing the disparity distribution the graph sees.
+    train_crop: tuple[int, int] | None = None
 
 
 def photometric_augment(image: np.ndarray, rng: np.random.Generator, noise_sigma_max: float = 4.0) -> np.ndarray:
@@ -102,6 +110,22 @@ def _to_rgb_float(image: np.ndarray) -> np.ndarray:
     if x.ndim == 2:
         x = np.repeat(x[..., None], 3, axis=2)
     return x
+
+
+def _random_subcrop(arrays: tuple[np.ndarray, ...], target: np.ndarray, crop: tuple[int, int],
+                    rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """Cut the same random (w, h) window out of every (H, W[, C]) array, holding the target centre if any."""
+    h, w = target.shape
+    cw, ch = min(int(crop[0]), w), min(int(crop[1]), h)
+    ys, xs = np.nonzero(target)
+    if len(xs):
+        cx, cy = int(xs.mean()), int(ys.mean())
+        x0 = int(rng.integers(max(0, cx - cw + 1), min(w - cw, cx) + 1))
+        y0 = int(rng.integers(max(0, cy - ch + 1), min(h - ch, cy) + 1))
+    else:
+        x0 = int(rng.integers(0, w - cw + 1))
+        y0 = int(rng.integers(0, h - ch + 1))
+    return tuple(a[y0:y0 + ch, x0:x0 + cw] for a in arrays)
 
 
 class StereoCropDataset:
@@ -173,15 +197,21 @@ class StereoCropDataset:
         rv = roi.warp_to_net(_to_rgb_float(right), t)
         dv = roi.warp_to_net(disp, t, nearest=True) * np.float32(t.scale)
         mv = roi.warp_to_net(target.astype(np.uint8), t, nearest=True) > 0
-        valid = mv & (dv > 0) & (dv < cfg.max_disp)
+        if cfg.supervise_background:
+            valid = (mv & (dv > 0) | ~mv) & (dv < cfg.max_disp)
+            dv = np.where(mv, dv, np.float32(0.0))
+        else:
+            valid = mv & (dv > 0) & (dv < cfg.max_disp)
         if rng is not None and cfg.augment:
             lv = photometric_augment(lv, rng, cfg.noise_sigma_max)
             rv = photometric_augment(rv, rng, cfg.noise_sigma_max)
             if rng.random() < cfg.grey_prob:
                 lv = np.repeat(lv.mean(axis=2, keepdims=True), 3, axis=2)
                 rv = np.repeat(rv.mean(axis=2, keepdims=True), 3, axis=2)
+        if rng is not None and cfg.train_crop is not None:
+            lv, rv, dv, valid, mv = _random_subcrop((lv, rv, dv, valid, mv), mv, cfg.train_crop, rng)
         return {"left": lv, "right": rv, "disparity": dv.astype(np.float32), "valid": valid,
-                "scale": float(t.scale), "kind": kind}
+                "target": mv, "scale": float(t.scale), "kind": kind}
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         import torch
@@ -195,6 +225,7 @@ class StereoCropDataset:
             "right": torch.from_numpy(np.ascontiguousarray(view["right"].transpose(2, 0, 1), dtype=np.float32)),
             "disparity": torch.from_numpy(view["disparity"][None].copy()),
             "valid": torch.from_numpy(view["valid"][None].astype(np.float32)),
+            "target": torch.from_numpy(view["target"][None].astype(np.float32)),
             "scale": float(view["scale"]),
             "kind": view["kind"],
             "regime": rec.regime,

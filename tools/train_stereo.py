@@ -58,6 +58,7 @@ class TrainConfig:
     weight_decay: float = 1e-5
     clip: float = 1.0
     size: tuple[int, int] = (256, 256)
+    train_crop: tuple[int, int] | None = None  # random sub-crop of each sample (see StereoCropConfig)
     roi_prob: float = 0.75
     ckpt_every: int = 200
     log_every: int = 10
@@ -74,8 +75,9 @@ class TrainConfig:
         return base.replace(train_iters=self.iters, **self.stereo)
 
     def crop_config(self, augment: bool = True) -> StereoCropConfig:
+        crop = tuple(self.train_crop) if (augment and self.train_crop) else None
         return StereoCropConfig(size=tuple(self.size), roi_prob=self.roi_prob,
-                                max_disp=float(self.stereo_config().max_disp), augment=augment)
+                                max_disp=float(self.stereo_config().max_disp), augment=augment, train_crop=crop)
 
 
 def git_commit(cwd: str | Path | None = None) -> str | None:
@@ -181,14 +183,15 @@ def _to_float(metrics: dict[str, Any]) -> dict[str, float]:
 
 @torch.no_grad()
 def validate(model: torch.nn.Module, dataset: StereoCropDataset, device: torch.device, iters: int) -> dict[str, float]:
-    """EPE / bad-3 over valid pixels of deterministic ROI views of a few test frames."""
+    """EPE / bad-3 over target pixels of deterministic ROI views of a few test frames."""
     model.eval()
     err_sum, bad3, n = 0.0, 0.0, 0
     for i in range(len(dataset)):
         s = dataset[i]
         left, right = s["left"][None].to(device), s["right"][None].to(device)
         pred = model(left, right, iters=iters, test_mode=True)
-        gt, valid = s["disparity"][None].to(device), s["valid"][None].to(device) > 0.5
+        gt = s["disparity"][None].to(device)
+        valid = (s["valid"][None].to(device) > 0.5) & (s["target"][None].to(device) > 0.5)
         e = (pred - gt).abs()[valid]
         err_sum += float(e.sum())
         bad3 += float((e > 3).sum())

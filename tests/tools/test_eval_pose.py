@@ -61,7 +61,9 @@ def test_full_pipeline_with_baseline(tmp_path_factory, tmp_path, monkeypatch, ca
     bundle = make_pose_bundle(tmp_path / "bundle", ckpt)
 
     fake = types.ModuleType("spacepose.tools.classical_pose")
-    fake.estimate_classical = lambda left, right, rig, target: (np.eye(3), np.array([0.0, 0.0, 15.0]), True)
+    fake.estimate_classical = lambda left, right, K, baseline_m, pts, normals: types.SimpleNamespace(
+        R=np.eye(3), t=np.array([0.0, 0.0, 15.0]), valid=True)
+    fake.model_cloud = lambda target, n=20000, seed=0: (np.zeros((10, 3)), np.tile([0.0, 0.0, 1.0], (10, 1)))
     monkeypatch.setitem(sys.modules, "spacepose.tools.classical_pose", fake)
 
     from spacepose.tools import cli_eval_pose

@@ -25,8 +25,12 @@ def test_sample_contents_and_gt_scaling(synthetic_dataset):
             s = ds[i]
             kinds.add(s["kind"])
             assert s["left"].shape == (3, 64, 64) and s["disparity"].shape == (1, 64, 64)
-            valid = s["valid"] > 0.5
+            target = s["target"] > 0.5
+            valid = (s["valid"] > 0.5) & target
             assert valid.any()
+            # background is supervised at its true disparity 0 (at infinity)
+            background = ~target
+            assert torch.all(s["valid"][background] > 0.5) and torch.all(s["disparity"][background] == 0)
             # the synthetic plates have constant disparity: every valid GT pixel = d_frame * scale
             vals = s["disparity"][valid]
             assert torch.allclose(vals, vals[0].expand_as(vals))
@@ -55,3 +59,16 @@ def test_augmentation_is_deterministic_per_epoch_and_asymmetric(synthetic_datase
     c = ds[2]
     assert not torch.equal(a["left"], c["left"])
     assert float(a["left"].min()) >= 0 and float(a["left"].max()) <= 255
+
+
+def test_train_crop_holds_target_and_keeps_disparity(synthetic_dataset):
+    full = StereoCropDataset(synthetic_dataset, "train", StereoCropConfig(size=(64, 64), augment=False), seed=3)
+    cropped = StereoCropDataset(synthetic_dataset, "train",
+                                StereoCropConfig(size=(64, 64), augment=False, train_crop=(32, 32)), seed=3)
+    for i in range(len(full)):
+        a, b = full[i], cropped[i]
+        assert b["left"].shape == (3, 32, 32) and b["disparity"].shape == (1, 32, 32)
+        assert b["target"].sum() > 0  # the crop holds the target centre
+        assert a["scale"] == b["scale"]
+        # same GT values: a sub-crop does not rescale disparity
+        assert set(b["disparity"][b["target"] > 0.5].unique().tolist()) <= set(a["disparity"].unique().tolist())
