@@ -65,7 +65,6 @@ def count_macs(net: dict[str, Any]) -> dict[str, float]:
 
 def _cpu_peak_bytes(fn) -> int:
     """Peak of live tensor bytes allocated by ``fn`` (torch profiler memory events, CPU)."""
-    import torch
     from torch.profiler import ProfilerActivity, profile
 
     with profile(activities=[ProfilerActivity.CPU], profile_memory=True) as prof:
@@ -75,7 +74,6 @@ def _cpu_peak_bytes(fn) -> int:
     for e in events:
         live += e.cpu_memory_usage
         peak = max(peak, live)
-    del torch
     return peak
 
 
