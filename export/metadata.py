@@ -16,9 +16,10 @@ __all__ = ["SCHEMA_VERSION", "STEREO_NORMALISATION", "stereo_metadata", "git_com
 
 SCHEMA_VERSION = 1
 
-#: what the graph expects: float32 RGB in [0, 255], grey replicated to 3 channels, no mean/std
-STEREO_NORMALISATION = {"range": [0.0, 255.0], "channels": "RGB", "grey": "replicate", "layout": "NCHW",
-                        "uint16": "scale by 255/65535"}
+#: what the graph expects, by name (runtime/bundle.py checks the same name): "rgb_0_255" = float32
+#: NCHW RGB in [0, 255], grey replicated to 3 channels, uint16 scaled by 255/65535, no mean/std
+#: (the network normalises internally)
+STEREO_NORMALISATION = "rgb_0_255"
 
 
 def git_commit(cwd: str | Path | None = None) -> str | None:
@@ -60,7 +61,7 @@ def stereo_metadata(
         "outputs": {"disparity": [1, 1, h, w]},
         "input_size": [w, h],
         "iters": int(iters),
-        "normalisation": dict(STEREO_NORMALISATION),
+        "normalisation": STEREO_NORMALISATION,
         "disparity_units": "input pixels of the graph view (divide by the view scale for frame pixels)",
         "variant": cfg.get("variant"),
         "max_disp": cfg.get("max_disp"),

@@ -116,9 +116,9 @@ def draw_overlay(image: np.ndarray, result, bundle, K: np.ndarray) -> np.ndarray
     """RGB uint8 copy of ``image`` with the target's projected 3-D bounding box (valid poses)."""
     import cv2
 
-    from .estimator import _to_rgb_uint8
+    from .pose_preprocess import to_rgb_uint8
 
-    out = _to_rgb_uint8(image).copy()
+    out = to_rgb_uint8(image).copy()
     if result.valid:
         corners = bundle.bbox_corners @ np.asarray(result.R).T + np.asarray(result.t)
         if np.all(corners[:, 2] > 0):

@@ -2,8 +2,9 @@
 
 The flow of one frame (DESIGN.md), each step a named stage timed in ``PoseResult.timings_ms``::
 
-    validate -> rectify -> stereo (coarse pass or prior ROI, fine pass) -> points (triangulate,
-    back-project, sample) -> pose_inputs (crop, kNN indices) -> pose_net (ONNX) -> voting
+    validate -> rectify -> stereo (coarse pass or prior ROI, fine pass) -> pose_inputs (triangulate,
+    back-project, sample, RGB crop, kNN indices: spacepose.pose_preprocess, shared with training)
+    -> pose_net (ONNX) -> voting
     (MeanShift + SVD fit, validity, confidence) [-> refine (ICP, off by default)]
 
 Input rule (one rule, no exceptions): an argument that is not a numpy array is a programming error
@@ -34,8 +35,7 @@ import numpy as np
 from . import roi
 from .bundle import ModelBundle, load_bundle
 from .errors import ShapeError
-from .geometry import backproject, disparity_to_depth, sample_indices
-from .pose_inputs import build_pose_inputs
+from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose
 from .profiler import StageTimer
 
@@ -48,7 +48,6 @@ DARK_FRACTION = 0.02
 #: a frame with more than this fraction of pixels at full scale is "saturated"
 SATURATED_FRACTION = 0.5
 #: pose crop side = this margin * longest side of the target pixels' box
-POSE_CROP_MARGIN = 1.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,34 +125,6 @@ def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
     q = np.asarray(q)
     q /= np.linalg.norm(q)
     return -q if q[0] < 0 else q
-
-
-def pose_crop_window(pixels: np.ndarray, margin: float = POSE_CROP_MARGIN, min_side: int = 16) -> roi.Window:
-    """Square left-image window around the target pixels (N, 2) ``(u, v)`` that the pose graph sees.
-
-    The side is ``margin`` times the longest side of the pixels' box (at least ``min_side``),
-    centred on the box; it may leave the image (zero padded). Training must crop the same way.
-    """
-    u0, v0 = pixels.min(axis=0).astype(np.float64)
-    u1, v1 = pixels.max(axis=0).astype(np.float64) + 1.0
-    side = int(math.ceil(max(u1 - u0, v1 - v0, 1.0) * margin))
-    side = max(side, int(min_side))
-    cx, cy = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
-    return roi.Window(int(round(cx - side / 2.0)), int(round(cy - side / 2.0)), side)
-
-
-def _to_rgb_uint8(image: np.ndarray) -> np.ndarray:
-    if image.ndim == 3 and image.shape[2] == 1:
-        image = image[..., 0]
-    if image.dtype == np.uint8:
-        out = image
-    elif image.dtype == np.uint16:
-        out = (image >> 8).astype(np.uint8)
-    else:
-        out = np.clip(np.rint(image), 0, 255).astype(np.uint8)
-    if out.ndim == 2:
-        out = np.repeat(out[..., None], 3, axis=2)
-    return np.ascontiguousarray(out)
 
 
 def _full_scale(image: np.ndarray) -> float:
@@ -265,6 +236,7 @@ class PoseEstimator:
                                     margin=self.bundle.stereo.window_margin)
         self.pose_session = make_session(self.bundle.pose_path, threads=self.threads)
         self._pose_outputs = [o.name for o in self.pose_session.get_outputs()]
+        self._pose_inputs = [i.name for i in self.pose_session.get_inputs()]  # variants drop unused inputs
         for name in ("seg_logits", "kp_offsets", "ctr_offsets"):
             if name not in self._pose_outputs:
                 from .errors import BundleError
@@ -372,34 +344,21 @@ class PoseEstimator:
             return self._result("no_target", timer, detail="the coarse stereo pass found no target")
 
         bundle, voting = self.bundle, self.bundle.voting
-        with timer.stage("points"):
-            depth = disparity_to_depth(stereo.disparity, self.focal_px, self.baseline_m)
-            near, far = bundle.distance_range_m
-            z_lo = max(near * (1.0 - voting.depth_margin) - bundle.radius, 1e-3)
-            z_hi = far * (1.0 + voting.depth_margin) + bundle.radius
-            mask = (depth >= z_lo) & (depth <= z_hi)
-            cloud = backproject(depth, self.K, mask)
-        if len(cloud) < voting.min_points:
-            status = "no_target" if len(cloud) == 0 else "too_few_points"
-            return self._result(status, timer, window=stereo.window,
-                                detail=f"{len(cloud)} stereo points within {z_lo:.1f}-{z_hi:.1f} m")
-
         with timer.stage("pose_inputs"):
-            idx = sample_indices(len(cloud), self._spec.n_points, self.seed)
-            xyz = np.ascontiguousarray(cloud.points[idx], dtype=np.float32)
-            pixels = cloud.pixels[idx]
-            window = pose_crop_window(pixels)
-            rgb_crop, transform = roi.crop_resize(_to_rgb_uint8(left_r), window, self._spec.crop_size)
-            cw, ch = self._spec.crop_size
-            crop_px = np.rint(transform.to_net(pixels.astype(np.float64))).astype(np.int64)
-            crop_px[:, 0] = np.clip(crop_px[:, 0], 0, cw - 1)
-            crop_px[:, 1] = np.clip(crop_px[:, 1], 0, ch - 1)
-            inputs, _ = build_pose_inputs(rgb_crop, xyz, crop_px, self._spec)
+            # the very function the pose net was trained with (spacepose.tools.pose_data)
+            prep = prepare_pose_inputs(
+                left_r, stereo.disparity, self.K, self.baseline_m, self._spec, seed=self.seed,
+                depth_range_m=depth_window(bundle.distance_range_m, bundle.radius, voting.depth_margin),
+                min_points=voting.min_points)
+        if prep.status != "ok":
+            return self._result(prep.status, timer, window=stereo.window, detail=prep.detail)
+        xyz = prep.xyz_cam
+        inputs = {name: prep.feeds[name] for name in self._pose_inputs}
         with timer.stage("pose_net"):
             outputs = dict(zip(self._pose_outputs, self.pose_session.run(self._pose_outputs, inputs)))
         with timer.stage("voting"):
             stage = solve_pose(
-                xyz.astype(np.float64), outputs["seg_logits"].astype(np.float32),
+                xyz, outputs["seg_logits"].astype(np.float32),
                 outputs["kp_offsets"].astype(np.float32), outputs["ctr_offsets"].astype(np.float32),
                 bundle.keypoints, bundle.centre, config=voting, diameter_m=bundle.diameter,
                 distance_range_m=bundle.distance_range_m, focal_px=self.focal_px, baseline_m=self.baseline_m,

@@ -16,7 +16,7 @@ from spacepose.calibration.rig import StereoRig, paper_rig, save_rig  # noqa: E4
 from spacepose.errors import BundleError, ShapeError  # noqa: E402
 from spacepose.estimator import PoseEstimator, PoseResult, refine_icp, rotation_to_quaternion  # noqa: E402
 
-STAGES = ["validate", "rectify", "stereo", "points", "pose_inputs", "pose_net", "voting"]
+STAGES = ["validate", "rectify", "stereo", "pose_inputs", "pose_net", "voting"]
 
 
 @pytest.fixture(scope="module")

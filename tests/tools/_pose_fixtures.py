@@ -61,17 +61,9 @@ def make_pose_bundle(folder: Path, ckpt: Path) -> Path:
                  "rig": {"image_size": [160, 120], "focal_px": 200.0, "baseline_m": 1.0},
                  "voting": {"min_points": 16}})
     data.setdefault("distance_range_m", [10.0, 20.0])
-    # the stereo export writes normalisation as a dict, bundle.json expects "rgb_0_255": align the graph
-    import onnx
+    from spacepose.onnx_session import read_metadata
 
-    from spacepose.onnx_session import read_metadata, write_metadata
-
-    meta = read_metadata(folder / "stereo.onnx")
-    meta["normalisation"] = "rgb_0_255"
-    data["stereo"]["max_disp"] = meta.get("max_disp", 192)
-    proto = onnx.load(str(folder / "stereo.onnx"))
-    write_metadata(proto, meta)
-    onnx.save(proto, str(folder / "stereo.onnx"))
+    data["stereo"]["max_disp"] = read_metadata(folder / "stereo.onnx").get("max_disp", 192)
     path.write_text(json.dumps(data, indent=1))
     (folder / "MODEL_CARD.md").write_text("# tiny test bundle\n")
     return folder
