@@ -175,3 +175,50 @@ def export_random_stereo(path: str | os.PathLike, *, size: tuple[int, int] = (64
                            dataset={"note": "random init, untrained"}, training_commit=None)
     meta["training_commit"] = None
     return export_stereo(model, path, size=size, iters=iters, metadata=meta, force=force), model
+
+
+def write_stereo_manifest(bundle_dir: str | os.PathLike, *, input_size: tuple[int, int], iters: int, max_disp: float,
+                          rig_path: str | os.PathLike, stereo_file: str = "stereo.onnx",
+                          window_margin: float | None = None, dataset: Mapping[str, Any] | None = None,
+                          metrics: Mapping[str, Any] | None = None) -> Path:
+    """Write the stereo side of ``bundle_dir/bundle.json`` (atomic; other sections are kept).
+
+    Sets ``stereo`` (file, input size, iterations, normalisation, max_disp[, window_margin]) and
+    ``rig`` — the image size, rectified focal length and baseline of the rig the graph was trained
+    on, read from ``rig_path`` (the dataset's ``rig.yaml``), which :meth:`ModelBundle.check_fits`
+    compares a flight calibration against — and, when given, ``dataset`` and ``metrics.stereo``.
+    """
+    import json
+
+    from spacepose.calibration.rectify import rectify
+    from spacepose.calibration.rig import load_rig
+    from spacepose.errors import BundleError
+
+    from .metadata import STEREO_NORMALISATION
+
+    folder = Path(bundle_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "bundle.json"
+    data: dict[str, Any] = {}
+    if path.is_file():
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as err:
+            raise BundleError(f"{path} is unreadable: {err}") from err
+    data["schema"] = "spacepose.bundle/1"
+    stereo = {"file": stereo_file, "input_size": [int(input_size[0]), int(input_size[1])], "iters": int(iters),
+              "normalisation": STEREO_NORMALISATION, "max_disp": float(max_disp)}
+    if window_margin is not None:
+        stereo["window_margin"] = float(window_margin)
+    data["stereo"] = stereo
+    rect = rectify(load_rig(rig_path))
+    data["rig"] = {"image_size": [int(v) for v in rect.image_size], "focal_px": float(rect.focal_px),
+                   "baseline_m": float(rect.baseline_m)}
+    if dataset is not None:
+        data["dataset"] = {**dict(data.get("dataset") or {}), **dict(dataset)}
+    if metrics is not None:
+        data["metrics"] = {**dict(data.get("metrics") or {}), "stereo": dict(metrics)}
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+    return path

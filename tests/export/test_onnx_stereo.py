@@ -64,3 +64,22 @@ def test_forbidden_ops_detects_gridsample():
     node = helper.make_node("GridSample", ["x", "g"], ["y"])
     graph = helper.make_graph([node], "g", [], [])
     assert forbidden_ops(helper.make_model(graph)) == {"GridSample"}
+
+
+def test_write_stereo_manifest_merges_and_reads_training_rig(tmp_path):
+    import json
+
+    from spacepose.calibration.rig import paper_rig, save_rig
+    from spacepose.export.onnx_stereo import write_stereo_manifest
+
+    save_rig(paper_rig(640, 480), tmp_path / "rig.yaml")
+    bundle = tmp_path / "bundle"
+    bundle.mkdir()
+    (bundle / "bundle.json").write_text(json.dumps({"pose": {"file": "pose.onnx"}, "metrics": {"pose": {"e_t": 1}}}))
+    path = write_stereo_manifest(bundle, input_size=(256, 256), iters=4, max_disp=96, rig_path=tmp_path / "rig.yaml",
+                                 metrics={"epe": 0.5})
+    data = json.loads(path.read_text())
+    assert data["pose"] == {"file": "pose.onnx"}                      # the pose side is kept
+    assert data["metrics"] == {"pose": {"e_t": 1}, "stereo": {"epe": 0.5}}
+    assert data["stereo"]["input_size"] == [256, 256] and data["stereo"]["normalisation"] == "rgb_0_255"
+    assert data["rig"] == {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0}
