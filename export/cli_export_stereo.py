@@ -3,27 +3,20 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
+
+from spacepose.cli_args import parse_size
+from spacepose.export.cli_common import (add_checkpoint_arguments, add_metrics_arguments, load_metrics,
+                                         require_export_extras)
 
 HELP = "export a TSCA-Stereo checkpoint to one ONNX file (fixed size and iterations) with a parity check"
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"size must be WxH, got {text!r}") from err
-    return w, h
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("checkpoint", type=Path, help="training checkpoint (runs/stereo/last.pt)")
-    parser.add_argument("--out", type=Path, default=Path("runtime/bundles/default/stereo.onnx"))
+    add_checkpoint_arguments(parser, "stereo")
     parser.add_argument("--iters", type=int, default=4, help="iterations frozen into the graph")
-    parser.add_argument("--size", type=_size, default=(256, 256), help="graph input WxH (multiples of 32)")
-    parser.add_argument("--metrics", type=Path, default=None, help="JSON of test metrics to embed (eval-stereo output)")
-    parser.add_argument("--no-parity", action="store_true", help="skip the torch vs onnxruntime check")
+    parser.add_argument("--size", type=parse_size, default=(256, 256), help="graph input WxH (multiples of 32)")
+    add_metrics_arguments(parser, "stereo")
     parser.add_argument("--rig", type=Path, default=None,
                         help="rig the graph was trained on (default: rig.yaml of the checkpoint's dataset); "
                              "with it the stereo and rig sections of bundle.json beside --out are written")
@@ -32,16 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from spacepose._optional import import_optional
-
-    import_optional("torch")
-    import_optional("onnx")
+    require_export_extras()
     from spacepose.export.onnx_stereo import export_checkpoint
 
-    metrics = None
-    if args.metrics is not None:
-        doc = json.loads(args.metrics.read_text())
-        metrics = doc.get("ours", {}).get("overall", doc) if isinstance(doc, dict) else None
+    metrics = load_metrics(args.metrics)
     result = export_checkpoint(args.checkpoint, args.out, iters=args.iters, size=tuple(args.size), force=args.force,
                                metrics=metrics, parity=not args.no_parity)
     print(f"wrote {result['path']} ({args.size[0]}x{args.size[1]}, {args.iters} iters)")

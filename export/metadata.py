@@ -12,7 +12,7 @@ import subprocess
 from pathlib import Path
 from typing import Any, Mapping
 
-__all__ = ["SCHEMA_VERSION", "STEREO_NORMALISATION", "stereo_metadata", "git_commit"]
+__all__ = ["SCHEMA_VERSION", "STEREO_NORMALISATION", "stereo_metadata", "git_commit", "provenance", "with_extra"]
 
 SCHEMA_VERSION = 1
 
@@ -30,6 +30,25 @@ def git_commit(cwd: str | Path | None = None) -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() or None
+
+
+def provenance(*, dataset: Mapping[str, Any] | None = None, training_commit: str | None = None,
+               metrics: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The contract keys every exported graph carries: dataset, training commit (``git_commit()`` if
+    None), metrics and the export time (UTC)."""
+    return {
+        "dataset": dict(dataset or {}),
+        "training_commit": training_commit if training_commit is not None else git_commit(),
+        "metrics": dict(metrics or {}),
+        "exported_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+    }
+
+
+def with_extra(meta: dict[str, Any], extra: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``meta`` updated with ``extra`` (when given)."""
+    if extra:
+        meta.update(dict(extra))
+    return meta
 
 
 def stereo_metadata(
@@ -66,11 +85,6 @@ def stereo_metadata(
         "variant": cfg.get("variant"),
         "max_disp": cfg.get("max_disp"),
         "config": cfg,
-        "dataset": dict(dataset or {}),
-        "training_commit": training_commit if training_commit is not None else git_commit(),
-        "metrics": dict(metrics or {}),
-        "exported_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        **provenance(dataset=dataset, training_commit=training_commit, metrics=metrics),
     }
-    if extra:
-        meta.update(dict(extra))
-    return meta
+    return with_extra(meta, extra)

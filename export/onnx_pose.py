@@ -17,12 +17,9 @@
 from __future__ import annotations
 
 import dataclasses
-import datetime as _dt
 import json
 import logging
 import os
-import tempfile
-import warnings
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -30,10 +27,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from spacepose.errors import BundleError, SpaceposeError
-from spacepose.export.metadata import SCHEMA_VERSION, git_commit
+from spacepose.errors import SpaceposeError
+from spacepose.export.metadata import SCHEMA_VERSION, provenance, with_extra
+from spacepose.export.onnx_common import (FORBIDDEN_OPS, OPSET, check_overwrite, enforce_parity, export_onnx_file,
+                                          max_abs_diff, merge_manifest_section, update_manifest)
 from spacepose.models.pose_config import PoseNetConfig
-from spacepose.onnx_session import make_session, write_metadata
+from spacepose.onnx_session import make_session
 from spacepose.pose_inputs import PoseInputSpec, build_pose_inputs, pose_input_names
 
 log = logging.getLogger(__name__)
@@ -41,10 +40,7 @@ log = logging.getLogger(__name__)
 __all__ = ["OPSET", "FORBIDDEN_OPS", "OUTPUT_NAMES", "pose_metadata", "example_feeds", "export_pose", "parity_check",
            "export_checkpoint", "write_pose_manifest", "target_geometry"]
 
-OPSET = 17
-FORBIDDEN_OPS = frozenset({"GridSample", "ScatterND"})
 OUTPUT_NAMES = ("seg_logits", "kp_offsets", "ctr_offsets")
-BUNDLE_SCHEMA = "spacepose.bundle/1"
 
 
 def pose_metadata(net_config: PoseNetConfig, *, keypoints: np.ndarray, centre: np.ndarray, target: str,
@@ -81,14 +77,9 @@ def pose_metadata(net_config: PoseNetConfig, *, keypoints: np.ndarray, centre: n
         "normalisation": {"rgb": "float32 RGB 0-255, normalised inside the graph",
                           "points": "[(xyz - mean of sampled xyz) / xyz_scale, rgb / 255 (, normals)]"},
         "config": json.loads(json.dumps(dataclasses.asdict(net_config), default=list)),
-        "dataset": dict(dataset or {}),
-        "training_commit": training_commit if training_commit is not None else git_commit(),
-        "metrics": dict(metrics or {}),
-        "exported_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        **provenance(dataset=dataset, training_commit=training_commit, metrics=metrics),
     }
-    if extra:
-        meta.update(dict(extra))
-    return meta
+    return with_extra(meta, extra)
 
 
 def example_feeds(spec: PoseInputSpec, seed: int = 0, distance_m: float = 20.0) -> dict[str, np.ndarray]:
@@ -103,23 +94,6 @@ def example_feeds(spec: PoseInputSpec, seed: int = 0, distance_m: float = 20.0) 
     return feeds
 
 
-def _forbidden(proto) -> set[str]:
-    found: set[str] = set()
-
-    def visit(graph) -> None:
-        for node in graph.node:
-            if node.op_type in FORBIDDEN_OPS:
-                found.add(node.op_type)
-            for attr in node.attribute:
-                if attr.g is not None and len(attr.g.node):
-                    visit(attr.g)
-                for g in attr.graphs:
-                    visit(g)
-
-    visit(proto.graph)
-    return found
-
-
 def export_pose(model: nn.Module, path: str | os.PathLike, *, metadata: Mapping[str, Any], force: bool = False,
                 opset: int = OPSET) -> Path:
     """Export ``model`` (a :class:`~spacepose.models.pose_net.PoseNet`) into one ONNX file with ``metadata``.
@@ -127,32 +101,14 @@ def export_pose(model: nn.Module, path: str | os.PathLike, *, metadata: Mapping[
     Raises:
         SpaceposeError: ``path`` exists and ``force`` is False, or the graph holds a forbidden op.
     """
-    import onnx
-
-    out = Path(path)
-    if out.exists() and not force:
-        raise SpaceposeError(f"{out} exists; pass --force to overwrite")
+    out = check_overwrite(path, force)
     model = model.eval()
     spec = model.cfg.input_spec()
     feeds = example_feeds(spec)
     names = pose_input_names(spec.n_levels)
     args = tuple(torch.from_numpy(feeds[n]) for n in names)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
-        raw = Path(tmp) / "raw.onnx"
-        with torch.no_grad(), warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # tracer chatter; parity is checked instead
-            torch.onnx.export(model, args, str(raw), input_names=names, output_names=list(OUTPUT_NAMES),
-                              opset_version=opset, dynamo=False, do_constant_folding=True, external_data=False)
-        proto = onnx.load(str(raw))
-        bad = _forbidden(proto)
-        if bad:
-            raise SpaceposeError(f"exported pose graph contains forbidden ops {sorted(bad)}")
-        write_metadata(proto, dict(metadata))
-        onnx.checker.check_model(proto)
-        final = Path(tmp) / "final.onnx"
-        onnx.save(proto, str(final))
-        os.replace(final, out)
+    proto = export_onnx_file(model, args, out, input_names=names, output_names=OUTPUT_NAMES, metadata=metadata,
+                             opset=opset, graph_name="pose graph")
     log.info("exported %s (%d points, crop %s, %d nodes)", out, spec.n_points, spec.crop_size, len(proto.graph.node))
     return out
 
@@ -168,9 +124,7 @@ def parity_check(model: nn.Module, onnx_path: str | os.PathLike, *, seed: int = 
     got = session.run(list(OUTPUT_NAMES), feeds)
     diffs = {}
     for name, r, g in zip(OUTPUT_NAMES, ref, got):
-        if tuple(g.shape) != tuple(r.shape):
-            raise BundleError(f"onnxruntime {name} shape {g.shape} != torch {tuple(r.shape)}")
-        diffs[name] = float(np.max(np.abs(g.astype(np.float64) - r.numpy().astype(np.float64))))
+        diffs[name] = max_abs_diff(name, g, r.numpy())
     diffs["max"] = max(diffs.values())
     return diffs
 
@@ -198,40 +152,27 @@ def write_pose_manifest(bundle_dir: str | os.PathLike, *, net_config: PoseNetCon
     ``dataset``, ``training_commit`` and ``metrics.pose``. A manifest that did not exist holds only
     these sections (+ schema) until the stereo export adds its own.
     """
-    folder = Path(bundle_dir)
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / "bundle.json"
-    data: dict[str, Any] = {}
-    if path.is_file():
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as err:
-            raise BundleError(f"{path} is unreadable: {err}") from err
-    data["schema"] = BUNDLE_SCHEMA
-    tgt = dict(data.get("target") or {})
-    if tgt.get("name") not in (None, target):
-        log.warning("bundle.json target %r replaced by %r", tgt.get("name"), target)
-        tgt = {}
-    tgt.update({"name": target, "keypoints": np.asarray(keypoints, dtype=np.float64).tolist(),
-                "centre": np.asarray(centre, dtype=np.float64).reshape(3).tolist()})
-    tgt.update(dict(geometry or {}))
-    data["target"] = tgt
-    spec = net_config.input_spec()
-    pose = {"file": pose_file, "n_keypoints": int(net_config.n_keypoints), "offset_sign": 1}
-    pose.update({k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(spec).items()})
-    data["pose"] = pose
-    if distance_range_m is not None:
-        data["distance_range_m"] = [float(distance_range_m[0]), float(distance_range_m[1])]
-    if dataset is not None:
-        data["dataset"] = {**dict(data.get("dataset") or {}), **dict(dataset)}
-    if training_commit is not None:
-        data["training_commit"] = training_commit
-    if metrics is not None:
-        data["metrics"] = {**dict(data.get("metrics") or {}), "pose": dict(metrics)}
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    def update(data: dict[str, Any]) -> None:
+        tgt = dict(data.get("target") or {})
+        if tgt.get("name") not in (None, target):
+            log.warning("bundle.json target %r replaced by %r", tgt.get("name"), target)
+            tgt = {}
+        tgt.update({"name": target, "keypoints": np.asarray(keypoints, dtype=np.float64).tolist(),
+                    "centre": np.asarray(centre, dtype=np.float64).reshape(3).tolist()})
+        tgt.update(dict(geometry or {}))
+        data["target"] = tgt
+        spec = net_config.input_spec()
+        pose = {"file": pose_file, "n_keypoints": int(net_config.n_keypoints), "offset_sign": 1}
+        pose.update({k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(spec).items()})
+        data["pose"] = pose
+        if distance_range_m is not None:
+            data["distance_range_m"] = [float(distance_range_m[0]), float(distance_range_m[1])]
+        merge_manifest_section(data, "dataset", dataset)
+        if training_commit is not None:
+            data["training_commit"] = training_commit
+        merge_manifest_section(data, "metrics", metrics, sub="pose")
+
+    return update_manifest(bundle_dir, update)
 
 
 def export_checkpoint(ckpt_path: str | os.PathLike, out: str | os.PathLike, *, force: bool = False,
@@ -263,9 +204,7 @@ def export_checkpoint(ckpt_path: str | os.PathLike, out: str | os.PathLike, *, f
     if parity:
         diffs = parity_check(model, path)
         result["parity"] = diffs
-        if not diffs["max"] < tolerance:
-            path.unlink(missing_ok=True)
-            raise SpaceposeError(f"parity check failed: max |torch - onnxruntime| = {diffs['max']:.3g} >= {tolerance}")
+        enforce_parity(path, diffs["max"], tolerance)
     if update_manifest:
         if geometry is None:
             try:

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import logging
 import os
-import tempfile
-import warnings
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -21,18 +19,17 @@ import numpy as np
 import torch
 from torch import nn
 
-from spacepose.errors import BundleError, SpaceposeError
+from spacepose.errors import SpaceposeError
 from spacepose.export.metadata import stereo_metadata
+from spacepose.export.onnx_common import (FORBIDDEN_OPS, OPSET, check_overwrite, enforce_parity, export_onnx_file,
+                                          forbidden_ops, max_abs_diff, merge_manifest_section, update_manifest)
 from spacepose.models.stereo_config import StereoConfig
-from spacepose.onnx_session import make_session, write_metadata
+from spacepose.onnx_session import make_session
 
 log = logging.getLogger(__name__)
 
 __all__ = ["FORBIDDEN_OPS", "StereoExportWrapper", "export_stereo", "forbidden_ops", "parity_check",
            "parity_inputs", "export_checkpoint", "export_random_stereo"]
-
-FORBIDDEN_OPS = frozenset({"GridSample", "ScatterND"})
-OPSET = 17
 
 
 class StereoExportWrapper(nn.Module):
@@ -45,24 +42,6 @@ class StereoExportWrapper(nn.Module):
 
     def forward(self, left: torch.Tensor, right: torch.Tensor) -> torch.Tensor:
         return self.model(left, right, iters=self.iters, test_mode=True)
-
-
-def forbidden_ops(model_proto) -> set[str]:
-    """Op types of ``FORBIDDEN_OPS`` found anywhere in the graph (subgraphs included)."""
-    found: set[str] = set()
-
-    def visit(graph) -> None:
-        for node in graph.node:
-            if node.op_type in FORBIDDEN_OPS:
-                found.add(node.op_type)
-            for attr in node.attribute:
-                if attr.g is not None and len(attr.g.node):
-                    visit(attr.g)
-                for g in attr.graphs:
-                    visit(g)
-
-    visit(model_proto.graph)
-    return found
 
 
 def parity_inputs(size: tuple[int, int], seed: int = 0, disparity: float = 12.0) -> tuple[np.ndarray, np.ndarray]:
@@ -88,34 +67,15 @@ def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int,
     Raises:
         SpaceposeError: ``path`` exists and ``force`` is False, or the graph holds a forbidden op.
     """
-    import onnx
-
-    out = Path(path)
-    if out.exists() and not force:
-        raise SpaceposeError(f"{out} exists; pass --force to overwrite")
+    out = check_overwrite(path, force)
     w, h = (int(v) for v in size)
     if w % 32 or h % 32:
         raise SpaceposeError(f"export size must be multiples of 32, got {w}x{h}")
     model = model.eval()
     wrapper = StereoExportWrapper(model, iters).eval()
     left, right = (torch.from_numpy(a) for a in parity_inputs((w, h)))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
-        raw = Path(tmp) / "raw.onnx"
-        with torch.no_grad(), warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # tracer/constant-folding chatter; parity is checked instead
-            torch.onnx.export(wrapper, (left, right), str(raw), input_names=["left", "right"],
-                              output_names=["disparity"], opset_version=opset, dynamo=False,
-                              do_constant_folding=True, external_data=False)
-        proto = onnx.load(str(raw))
-        bad = forbidden_ops(proto)
-        if bad:
-            raise SpaceposeError(f"exported graph contains forbidden ops {sorted(bad)}")
-        write_metadata(proto, dict(metadata))
-        onnx.checker.check_model(proto)
-        final_tmp = Path(tmp) / "final.onnx"
-        onnx.save(proto, str(final_tmp))
-        os.replace(final_tmp, out)
+    proto = export_onnx_file(wrapper, (left, right), out, input_names=["left", "right"], output_names=["disparity"],
+                             metadata=metadata, opset=opset, graph_name="graph")
     log.info("exported %s (%dx%d, %d iters, %d nodes)", out, w, h, iters, len(proto.graph.node))
     return out
 
@@ -128,9 +88,7 @@ def parity_check(model: nn.Module, onnx_path: str | os.PathLike, *, size: tuple[
         ref = model.eval()(torch.from_numpy(left), torch.from_numpy(right), iters=iters, test_mode=True).numpy()
     session = make_session(onnx_path, threads=threads)
     (got,) = session.run(["disparity"], {"left": left, "right": right})
-    if got.shape != ref.shape:
-        raise BundleError(f"onnxruntime output shape {got.shape} != torch {ref.shape}")
-    return float(np.max(np.abs(got.astype(np.float64) - ref.astype(np.float64))))
+    return max_abs_diff("output", got, ref)
 
 
 def export_checkpoint(ckpt_path: str | os.PathLike, out: str | os.PathLike, *, iters: int, size: tuple[int, int],
@@ -157,9 +115,7 @@ def export_checkpoint(ckpt_path: str | os.PathLike, out: str | os.PathLike, *, i
     if parity:
         diff = parity_check(model, path, size=size, iters=iters)
         result["parity_max_abs_px"] = diff
-        if not diff < tolerance:
-            path.unlink(missing_ok=True)
-            raise SpaceposeError(f"parity check failed: max |torch - onnxruntime| = {diff:.3g} px >= {tolerance}")
+        enforce_parity(path, diff, tolerance, unit=" px")
     return result
 
 
@@ -188,37 +144,21 @@ def write_stereo_manifest(bundle_dir: str | os.PathLike, *, input_size: tuple[in
     on, read from ``rig_path`` (the dataset's ``rig.yaml``), which :meth:`ModelBundle.check_fits`
     compares a flight calibration against — and, when given, ``dataset`` and ``metrics.stereo``.
     """
-    import json
-
     from spacepose.calibration.rectify import rectify
     from spacepose.calibration.rig import load_rig
-    from spacepose.errors import BundleError
 
     from .metadata import STEREO_NORMALISATION
 
-    folder = Path(bundle_dir)
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / "bundle.json"
-    data: dict[str, Any] = {}
-    if path.is_file():
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as err:
-            raise BundleError(f"{path} is unreadable: {err}") from err
-    data["schema"] = "spacepose.bundle/1"
-    stereo = {"file": stereo_file, "input_size": [int(input_size[0]), int(input_size[1])], "iters": int(iters),
-              "normalisation": STEREO_NORMALISATION, "max_disp": float(max_disp)}
-    if window_margin is not None:
-        stereo["window_margin"] = float(window_margin)
-    data["stereo"] = stereo
-    rect = rectify(load_rig(rig_path))
-    data["rig"] = {"image_size": [int(v) for v in rect.image_size], "focal_px": float(rect.focal_px),
-                   "baseline_m": float(rect.baseline_m)}
-    if dataset is not None:
-        data["dataset"] = {**dict(data.get("dataset") or {}), **dict(dataset)}
-    if metrics is not None:
-        data["metrics"] = {**dict(data.get("metrics") or {}), "stereo": dict(metrics)}
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    def update(data: dict[str, Any]) -> None:
+        stereo = {"file": stereo_file, "input_size": [int(input_size[0]), int(input_size[1])], "iters": int(iters),
+                  "normalisation": STEREO_NORMALISATION, "max_disp": float(max_disp)}
+        if window_margin is not None:
+            stereo["window_margin"] = float(window_margin)
+        data["stereo"] = stereo
+        rect = rectify(load_rig(rig_path))
+        data["rig"] = {"image_size": [int(v) for v in rect.image_size], "focal_px": float(rect.focal_px),
+                       "baseline_m": float(rect.baseline_m)}
+        merge_manifest_section(data, "dataset", dataset)
+        merge_manifest_section(data, "metrics", metrics, sub="stereo")
+
+    return update_manifest(bundle_dir, update)

@@ -9,22 +9,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from spacepose.cli_args import size_type
+
 HELP = "render a few frames of the bundle's target, estimate their poses and print the errors"
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"size must be WIDTHxHEIGHT, got {text!r}") from err
-    if w < 16 or h < 16:
-        raise argparse.ArgumentTypeError(f"size must be at least 16x16, got {text!r}")
-    return w, h
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--count", type=int, default=4, help="frames to render (default 4)")
-    parser.add_argument("--size", type=_size, default=(1280, 960), help="image size WIDTHxHEIGHT (default 1280x960)")
+    parser.add_argument("--size", type=size_type(16), default=(1280, 960), help="image size WIDTHxHEIGHT (default 1280x960)")
     parser.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
     parser.add_argument("--bundle", type=Path, default=None, help="model bundle folder (default: the shipped one)")
     parser.add_argument("--threads", type=int, default=2, help="onnxruntime threads per graph")

@@ -338,10 +338,25 @@ class PoseEstimator:
         with timer.stage("rectify"):
             left_r, right_r = self.rectification.rectify_pair(left, right)
         hint = self._roi_hint()
+        outcome = self._pose_from_pair(left_r, right_r, hint, timer)
+        if hint is not None and outcome[0] != "ok":
+            # the previous pose's window may have lost the target (it moved, or the frames are not a
+            # sequence): look again over the whole frame rather than report a miss
+            logger.info("prior window gave %s; retrying with the coarse pass", outcome[0])
+            outcome = self._pose_from_pair(left_r, right_r, None, timer)
+        status, stage, window, detail = outcome
+        return self._result(status, timer, stage=stage, window=window, detail=detail)
+
+    def _pose_from_pair(self, left_r: np.ndarray, right_r: np.ndarray, hint, timer: StageTimer
+                        ) -> tuple[str, PoseStageResult | None, roi.Window | None, str]:
+        """stereo -> pose_inputs -> pose_net -> voting [-> refine] on a rectified pair.
+
+        Returns ``(status, pose stage result or None, fine window or None, detail)``.
+        """
         with timer.stage("stereo"):
             stereo = self.stereo.match(left_r, right_r, roi_hint=hint)
         if stereo.window is None:
-            return self._result("no_target", timer, detail="the coarse stereo pass found no target")
+            return "no_target", None, None, "the coarse stereo pass found no target"
 
         bundle, voting = self.bundle, self.bundle.voting
         with timer.stage("pose_inputs"):
@@ -351,7 +366,7 @@ class PoseEstimator:
                 depth_range_m=depth_window(bundle.distance_range_m, bundle.radius, voting.depth_margin),
                 min_points=voting.min_points)
         if prep.status != "ok":
-            return self._result(prep.status, timer, window=stereo.window, detail=prep.detail)
+            return prep.status, None, stereo.window, prep.detail
         xyz = prep.xyz_cam
         inputs = {name: prep.feeds[name] for name in self._pose_inputs}
         with timer.stage("pose_net"):
@@ -369,5 +384,4 @@ class PoseEstimator:
                 R, t = refine_icp(stage.R, stage.t, xyz, np.asarray(bundle.surface_points),
                                   self._surface_normals, max_distance=2.0 * stage.bandwidth, seed=self.seed)
                 stage = PoseStageResult(**{**stage.__dict__, "R": R, "t": t})
-        return self._result(stage.status, timer, stage=stage, window=stereo.window,
-                            detail="" if stage.valid else f"pose stage: {stage.status}")
+        return stage.status, stage, stereo.window, "" if stage.valid else f"pose stage: {stage.status}"

@@ -16,23 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spacepose.errors import ShapeError, check_shape
+from spacepose._checks import check_real
 
 __all__ = ["RigidFit", "fit_rigid", "STATUSES"]
 
 #: Every status string :func:`fit_rigid` can return.
 STATUSES = ("ok", "too_few_points", "non_finite", "bad_weights", "degenerate")
-
-_NUMERIC = (np.floating, np.integer)
-
-
-def _check_array(array: object, shape: tuple[int | None, ...], name: str) -> np.ndarray:
-    """``check_shape`` plus a real-number (float or int, not bool/complex) dtype check."""
-    checked = check_shape(array, shape, name)
-    if not any(np.issubdtype(checked.dtype, d) for d in _NUMERIC):
-        raise ShapeError(f"{name} must have a float or integer dtype, got {checked.dtype}")
-    return checked
-
 
 @dataclass(frozen=True)
 class RigidFit:
@@ -86,10 +75,10 @@ def fit_rigid(
         ShapeError: ``src``/``dst`` not (N, 3) numeric, different N, or ``weights`` not (N,) numeric.
         ValueError: ``rel_tol`` not in [0, 1).
     """
-    _check_array(src, (None, 3), "src")
-    _check_array(dst, (src.shape[0], 3), "dst")
+    check_real(src, (None, 3), "src")
+    check_real(dst, (src.shape[0], 3), "dst")
     if weights is not None:
-        _check_array(weights, (src.shape[0],), "weights")
+        check_real(weights, (src.shape[0],), "weights")
     if not (0.0 <= rel_tol < 1.0):
         raise ValueError(f"rel_tol must be in [0, 1), got {rel_tol!r}")
 

@@ -43,16 +43,7 @@ __all__ = [
 ]
 
 _SAMPLINGS = ("fps", "random")
-_FLOAT, _INT = "f", "iu"
-
-
-def _check(array: object, shape: tuple, name: str, kinds: str) -> np.ndarray:
-    """check_shape plus a dtype-kind check ("f" float, "iu" integer) with a readable message."""
-    check_shape(array, shape, name)
-    if array.dtype.kind not in kinds:  # type: ignore[union-attr]
-        want = " or ".join({"f": "floating", "i": "integer", "u": "unsigned"}[k] for k in kinds)
-        raise ShapeError(f"{name} must have a {want} dtype, got {array.dtype}")  # type: ignore[union-attr]
-    return array  # type: ignore[return-value]
+_FLOAT, _INT = (np.floating,), (np.integer,)  # check_shape dtypes
 
 
 @dataclass(frozen=True)
@@ -118,8 +109,8 @@ def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 512) ->
     broken by the lower index, so the result is deterministic. If ``ref`` has fewer than ``k``
     points, the farthest found neighbour is repeated to fill the row.
     """
-    _check(query, (None, None), "query", _FLOAT)
-    _check(ref, (None, query.shape[1]), "ref", _FLOAT)
+    check_shape(query, (None, None), "query", dtypes=_FLOAT)
+    check_shape(ref, (None, query.shape[1]), "ref", dtypes=_FLOAT)
     if len(ref) == 0:
         raise ShapeError("ref must hold at least one point")
     if k < 1:
@@ -150,7 +141,7 @@ def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 512) ->
 
 def farthest_point_sampling(xyz: np.ndarray, n_out: int, start: int = 0) -> np.ndarray:
     """Deterministic farthest point sampling: (n_out,) int64 indices into ``xyz`` (N, 3)."""
-    _check(xyz, (None, None), "xyz", _FLOAT)
+    check_shape(xyz, (None, None), "xyz", dtypes=_FLOAT)
     n = len(xyz)
     if not 1 <= n_out <= n:
         raise ValueError(f"n_out must be in [1, {n}], got {n_out}")
@@ -177,7 +168,7 @@ def build_point_indices(xyz: np.ndarray, spec: PoseInputSpec) -> dict[str, list[
     Returns ``{"nbr": [(N_l, K)], "sub": [(N_{l+1},)], "up": [(N_l,)], "level_ids": [(N_l,)]}``
     where ``level_ids[l]`` maps level-l points back to rows of ``xyz`` (level_ids[0] = arange).
     """
-    _check(xyz, (spec.n_points, 3), "xyz", _FLOAT)
+    check_shape(xyz, (spec.n_points, 3), "xyz", dtypes=_FLOAT)
     check_finite(xyz, "xyz")
     sizes = spec.level_sizes
     level_xyz = xyz.astype(np.float64)
@@ -200,7 +191,7 @@ def build_point_indices(xyz: np.ndarray, spec: PoseInputSpec) -> dict[str, list[
 
 def choose_from_pixels(pixels: np.ndarray, crop_size: tuple[int, int]) -> np.ndarray:
     """(N,) int64 flat index ``v * W + u`` of integer crop pixels (N, 2) given as (u=x, v=y)."""
-    _check(pixels, (None, 2), "pixels", _INT)
+    check_shape(pixels, (None, 2), "pixels", dtypes=_INT)
     w, h = crop_size
     u, v = pixels[:, 0].astype(np.int64), pixels[:, 1].astype(np.int64)
     if np.any((u < 0) | (u >= w) | (v < 0) | (v >= h)):
@@ -215,7 +206,7 @@ def pix2pt_indices(pixels: np.ndarray, crop_size: tuple[int, int], stride: int, 
     (i, j) sits at crop coordinate ((j + 0.5) * stride - 0.5, (i + 0.5) * stride - 0.5). Ties go to
     the lower point index.
     """
-    _check(pixels, (None, 2), "pixels", _INT + _FLOAT)
+    check_shape(pixels, (None, 2), "pixels", dtypes=_INT + _FLOAT)
     w, h = crop_size
     if w % stride or h % stride:
         raise ValueError(f"crop_size {crop_size} not divisible by stride {stride}")
@@ -250,12 +241,12 @@ def build_pose_inputs(rgb_crop: np.ndarray, xyz: np.ndarray, pixels: np.ndarray,
         (inputs keyed by :func:`pose_input_names`, xyz_mean (3,) float64).
     """
     w, h = spec.crop_size
-    _check(rgb_crop, (h, w, 3), "rgb_crop", "u")
+    check_shape(rgb_crop, (h, w, 3), "rgb_crop", dtypes=(np.unsignedinteger,))
     if rgb_crop.dtype != np.uint8:
         raise ShapeError(f"rgb_crop must be uint8, got {rgb_crop.dtype}")
-    _check(xyz, (spec.n_points, 3), "xyz", _FLOAT)
+    check_shape(xyz, (spec.n_points, 3), "xyz", dtypes=_FLOAT)
     check_finite(xyz, "xyz")
-    _check(pixels, (spec.n_points, 2), "pixels", _INT)
+    check_shape(pixels, (spec.n_points, 2), "pixels", dtypes=_INT)
     choose = choose_from_pixels(pixels, spec.crop_size)
     idx = build_point_indices(xyz, spec)
     xyz_mean = xyz.astype(np.float64).mean(axis=0)

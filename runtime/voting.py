@@ -27,6 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from spacepose._checks import check_real
 from spacepose.errors import ShapeError, check_shape
 
 __all__ = [
@@ -42,17 +43,6 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 KERNELS = ("flat", "gaussian")
-
-_NUMERIC = (np.floating, np.integer)
-
-
-def _check_array(array: object, shape: tuple[int | None, ...], name: str) -> np.ndarray:
-    """``check_shape`` plus a real-number (float or int, not bool/complex) dtype check."""
-    checked = check_shape(array, shape, name)
-    if not any(np.issubdtype(checked.dtype, d) for d in _NUMERIC):
-        raise ShapeError(f"{name} must have a float or integer dtype, got {checked.dtype}")
-    return checked
-
 
 @dataclass(frozen=True)
 class MeanShiftResult:
@@ -156,7 +146,7 @@ def mean_shift(
         ValueError: ``bandwidth`` <= 0 or non-finite, unknown ``kernel``, or a bad ``n_seeds``,
             ``max_iter`` or ``tol``.
     """
-    _check_array(points, (None, None), "points")
+    check_real(points, (None, None), "points")
     h = _check_bandwidth(bandwidth)
     if kernel not in KERNELS:
         raise ValueError(f"unknown kernel {kernel!r}; valid kernels: {', '.join(KERNELS)}")
@@ -176,7 +166,7 @@ def mean_shift(
         raise ShapeError(f"points has no finite rows (shape {tuple(points.shape)})")
 
     if seeds is not None:
-        _check_array(seeds, (None, pts.shape[1]), "seeds")
+        check_real(seeds, (None, pts.shape[1]), "seeds")
         start = np.asarray(seeds, dtype=np.float64)
         if start.shape[0] == 0 or not np.all(np.isfinite(start)):
             raise ShapeError("seeds must hold at least one row and be finite")
@@ -285,7 +275,7 @@ def centre_first_inliers(
         ShapeError: ``centre_votes`` is not (N, 3) numeric or has no finite row.
         ValueError: bad ``bandwidth`` or other parameters (see :func:`mean_shift`).
     """
-    _check_array(centre_votes, (None, 3), "centre_votes")
+    check_real(centre_votes, (None, 3), "centre_votes")
     result = mean_shift(centre_votes, bandwidth, kernel=kernel, n_seeds=n_seeds, seed=seed,
                         max_iter=max_iter, tol=tol)
     centre = result.modes[0]
@@ -321,7 +311,7 @@ def vote_keypoints(
         ShapeError: wrong shapes/dtypes, or ``inliers`` selects no point.
         ValueError: bad ``bandwidth`` or other parameters (see :func:`mean_shift`).
     """
-    _check_array(kp_votes, (None, None, 3), "kp_votes")
+    check_real(kp_votes, (None, None, 3), "kp_votes")
     check_shape(inliers, (kp_votes.shape[1],), "inliers", dtypes=(np.bool_,))
     _check_bandwidth(bandwidth)
     if not inliers.any():

@@ -6,22 +6,16 @@ import argparse
 import sys
 import time
 
+from spacepose.cli_args import parse_size
+
 HELP = "render a synthetic binocular dataset of a target spacecraft (sharded, resumable)"
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"size must look like WIDTHxHEIGHT (640x480), got {text!r}") from err
-    return w, h
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dataset", help="output folder (created; an existing one is resumed if it is the same dataset)")
     parser.add_argument("--target", default="tdrs", help="tdrs, mro or a mesh file path (default tdrs)")
     parser.add_argument("--count", type=int, default=2000, help="frames in total, train+test 9:1 (default 2000; the paper: 39600)")
-    parser.add_argument("--size", type=_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480; the paper: 1280x960)")
+    parser.add_argument("--size", type=parse_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480; the paper: 1280x960)")
     parser.add_argument("--seed", type=int, default=0, help="dataset seed (default 0)")
     parser.add_argument("--shard", default="1/1", help="render only shard k of K (1 <= k <= K), e.g. 3/8 (default 1/1)")
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")

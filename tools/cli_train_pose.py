@@ -12,6 +12,8 @@ import argparse
 import json
 from pathlib import Path
 
+from spacepose.tools.cli_training_args import add_loop_arguments, add_run_arguments
+
 HELP = "train the pose network (RGB + points + ECFT, FFB6D heads) on a rendered dataset; resumable"
 
 
@@ -26,10 +28,7 @@ def _override(text: str) -> tuple[str, object]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("dataset", type=Path, help="dataset folder (CONVENTIONS layout)")
-    parser.add_argument("--out", type=Path, default=Path("runs/pose"), help="run folder (checkpoint, log, config)")
-    parser.add_argument("--steps", type=int, default=1000)
-    parser.add_argument("--batch", type=int, default=8, help="batch per process")
+    add_run_arguments(parser, out="runs/pose", batch=8)
     parser.add_argument("--depth-source", choices=("stereo", "gt_noisy"), default="stereo",
                         help="stereo: cached predicted disparity (paper §4); gt_noisy: GT + stereo-like noise (bootstrap)")
     parser.add_argument("--stereo-graph", type=Path, default=None,
@@ -43,15 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lr-max", type=float, default=1e-3)
     parser.add_argument("--cycles", type=int, default=3)
     parser.add_argument("--no-augment", action="store_true", help="no photometric augmentation")
-    parser.add_argument("--ckpt-every", type=int, default=200)
-    parser.add_argument("--val-every", type=int, default=200)
-    parser.add_argument("--val-samples", type=int, default=8)
-    parser.add_argument("--log-every", type=int, default=10)
-    parser.add_argument("--workers", type=int, default=1, help="DataLoader workers")
-    parser.add_argument("--threads", type=int, default=0, help="torch.set_num_threads (0: torch default)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--limit", type=int, default=None, help="use only the first N training frames")
-    parser.add_argument("--resume", action="store_true", help="continue OUT/last.pt")
+    add_loop_arguments(parser, workers=1)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,40 +8,23 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
+
+from spacepose.cli_args import parse_size
+from spacepose.tools.cli_training_args import add_loop_arguments, add_run_arguments
 
 HELP = "train TSCA-Stereo (IGEV loss and schedule) on a rendered dataset; resumable"
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"size must be WxH, got {text!r}") from err
-    return w, h
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("dataset", type=Path, help="dataset folder (CONVENTIONS layout)")
-    parser.add_argument("--out", type=Path, default=Path("runs/stereo"), help="run folder (checkpoint, log, config)")
-    parser.add_argument("--steps", type=int, default=1000)
-    parser.add_argument("--batch", type=int, default=4, help="batch per process")
+    add_run_arguments(parser, out="runs/stereo", batch=4)
     parser.add_argument("--variant", choices=("igev", "ta", "seca", "full"), default="full")
     parser.add_argument("--preset", choices=("cpu", "paper"), default="cpu", help="model widths")
     parser.add_argument("--iters", type=int, default=4, help="update iterations in training")
     parser.add_argument("--lr", type=float, default=4e-4)
-    parser.add_argument("--size", type=_size, default=(256, 256), help="sample size WxH (the graph input)")
-    parser.add_argument("--train-crop", type=_size, default=None,
+    parser.add_argument("--size", type=parse_size, default=(256, 256), help="sample size WxH (the graph input)")
+    parser.add_argument("--train-crop", type=parse_size, default=None,
                         help="random sub-crop WxH of each sample (cheaper steps; default: whole sample)")
-    parser.add_argument("--ckpt-every", type=int, default=200)
-    parser.add_argument("--val-every", type=int, default=200)
-    parser.add_argument("--val-samples", type=int, default=8)
-    parser.add_argument("--log-every", type=int, default=10)
-    parser.add_argument("--workers", type=int, default=0, help="DataLoader workers")
-    parser.add_argument("--threads", type=int, default=0, help="torch.set_num_threads (0: torch default)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--limit", type=int, default=None, help="use only the first N training frames")
-    parser.add_argument("--resume", action="store_true", help="continue OUT/last.pt")
+    add_loop_arguments(parser, workers=0)
 
 
 def run(args: argparse.Namespace) -> int:

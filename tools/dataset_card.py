@@ -5,65 +5,28 @@ Reads only the CONVENTIONS layout (``labels.jsonl``, ``left/``), so it works on 
 
 from __future__ import annotations
 
-import json
 import logging
 from collections import Counter
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from spacepose.errors import DatasetError
 from spacepose.imageio import read_image
+from spacepose.tools.labels import FrameLabel
+from spacepose.tools.labels import read_labels as _read_labels
 
 log = logging.getLogger(__name__)
 
 DISTANCE_BINS_M = (10.0, 20.0, 30.0, 40.0, 50.0)
 
 
-@dataclass(frozen=True)
-class FrameLabel:
-    """One line of ``labels.jsonl`` (the fields the card needs)."""
-
-    frame: str
-    split: str
-    regime: str
-    R: np.ndarray  # (3, 3) object -> camera
-    t: np.ndarray  # (3,) metres
-    degradations: dict
-
-    @property
-    def camera_in_body(self) -> np.ndarray:
-        """Camera centre in the target body frame, (3,): ``-R^T t``."""
-        return -self.R.T @ self.t
-
-
 def read_labels(dataset: Path) -> list[FrameLabel]:
-    """Parse ``dataset/labels.jsonl``; DatasetError on a missing file or a malformed line."""
-    path = Path(dataset) / "labels.jsonl"
-    if not path.is_file():
-        raise DatasetError(f"{path} not found: not a spacepose dataset folder")
-    labels = []
-    with path.open() as fh:
-        for lineno, line in enumerate(fh, 1):
-            if not line.strip():
-                continue
-            try:
-                rec = json.loads(line)
-                labels.append(
-                    FrameLabel(
-                        frame=str(rec["frame"]),
-                        split=str(rec["split"]),
-                        regime=str(rec["regime"]),
-                        R=np.asarray(rec["R"], dtype=np.float64).reshape(3, 3),
-                        t=np.asarray(rec["t"], dtype=np.float64).reshape(3),
-                        degradations=dict(rec.get("degradations", {})),
-                    )
-                )
-            except (KeyError, ValueError, TypeError) as err:
-                raise DatasetError(f"{path}:{lineno}: malformed label line ({err})") from err
+    """Parse ``dataset/labels.jsonl`` (split, regime and pose required on every line); DatasetError on
+    a missing file, a malformed line or no frames."""
+    labels = _read_labels(dataset, require=("split", "regime", "R", "t"))
     if not labels:
-        raise DatasetError(f"{path} holds no frames")
+        raise DatasetError(f"{Path(dataset) / 'labels.jsonl'} holds no frames")
     return labels
 
 

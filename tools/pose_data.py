@@ -43,6 +43,7 @@ from spacepose.geometry import disparity_to_depth
 from spacepose.imageio import read_image, read_pfm
 from spacepose.pose_inputs import PoseInputSpec, pose_input_names
 from spacepose.pose_preprocess import PreparedPose, depth_window, prepare_pose_inputs
+from spacepose.tools.labels import FrameLabel, read_labels
 
 log = logging.getLogger(__name__)
 
@@ -85,41 +86,13 @@ class PoseDataConfig:
             raise ValueError(f"depth_source must be one of {DEPTH_SOURCES}, got {self.depth_source!r}")
 
 
-@dataclass(frozen=True)
-class PoseFrame:
-    """One labelled frame."""
-
-    frame: str
-    split: str
-    regime: str
-    R: np.ndarray
-    t: np.ndarray
-
-    @property
-    def distance_m(self) -> float:
-        return float(self.t[2])
+#: the pose samples' name of the shared label record (``R`` and ``t`` always set)
+PoseFrame = FrameLabel
 
 
 def read_pose_labels(root: str | Path, split: str | None = None) -> list[PoseFrame]:
     """Frames of ``labels.jsonl`` with their pose (optionally of one split), in file order."""
-    path = Path(root) / "labels.jsonl"
-    if not path.is_file():
-        raise DatasetError(f"{root}: no labels.jsonl")
-    out = []
-    with open(path, encoding="utf-8") as fh:
-        for lineno, line in enumerate(fh, 1):
-            if not line.strip():
-                continue
-            try:
-                obj = json.loads(line)
-                rec = PoseFrame(str(obj["frame"]), str(obj.get("split", "train")), str(obj.get("regime", "unknown")),
-                                np.asarray(obj["R"], dtype=np.float64).reshape(3, 3),
-                                np.asarray(obj["t"], dtype=np.float64).reshape(3))
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
-                raise DatasetError(f"{path}:{lineno}: bad label line: {err}") from err
-            if split is None or rec.split == split:
-                out.append(rec)
-    return out
+    return read_labels(root, split, require=("R", "t"))
 
 
 def dataset_info(root: str | Path) -> dict[str, Any]:

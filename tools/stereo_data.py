@@ -15,7 +15,6 @@ Ground-truth disparity is resampled with nearest neighbour and multiplied by ``s
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,41 +25,16 @@ import numpy as np
 from spacepose import roi
 from spacepose.errors import DatasetError
 from spacepose.imageio import read_image, read_pfm
+from spacepose.tools.labels import FrameLabel, read_labels
 
 log = logging.getLogger(__name__)
 
 __all__ = ["FrameRecord", "read_labels", "StereoCropConfig", "StereoCropDataset", "photometric_augment"]
 
 
-@dataclass(frozen=True)
-class FrameRecord:
-    """One labelled frame of a dataset."""
-
-    frame: str
-    split: str
-    regime: str
-    distance_m: float
-
-
-def read_labels(root: str | Path, split: str | None = None) -> list[FrameRecord]:
-    """Frames of ``labels.jsonl`` (optionally of one split), in file order."""
-    path = Path(root) / "labels.jsonl"
-    if not path.is_file():
-        raise DatasetError(f"{root}: no labels.jsonl")
-    records = []
-    with open(path, encoding="utf-8") as fh:
-        for lineno, line in enumerate(fh, 1):
-            if not line.strip():
-                continue
-            try:
-                obj = json.loads(line)
-                rec = FrameRecord(str(obj["frame"]), str(obj.get("split", "train")), str(obj.get("regime", "unknown")),
-                                  float(obj["t"][2]) if "t" in obj else float("nan"))
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError, IndexError) as err:
-                raise DatasetError(f"{path}:{lineno}: bad label line: {err}") from err
-            if split is None or rec.split == split:
-                records.append(rec)
-    return records
+#: the stereo samples' name of the shared label record (only ``frame``, ``split``, ``regime`` and
+#: ``distance_m`` are used here)
+FrameRecord = FrameLabel
 
 
 @dataclass(frozen=True)

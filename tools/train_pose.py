@@ -18,8 +18,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import os
-import random
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,21 +25,19 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.distributed as dist
 from torch.utils.data import DataLoader
 
 from spacepose.errors import DatasetError, SpaceposeError
 from spacepose.models.pose_config import PoseNetConfig
 from spacepose.models.pose_loss import PoseLossConfig, pose_loss
+from spacepose.tools import training_common as tc
 from spacepose.tools.pose_data import PoseDataConfig, PoseDataset
-from spacepose.tools.train_stereo import EpochSampler, git_commit
+from spacepose.tools.training_common import CHECKPOINT_NAME, EpochSampler, git_commit
 
 log = logging.getLogger(__name__)
 
 __all__ = ["TrainPoseConfig", "train_pose", "build_model", "load_checkpoint", "model_from_checkpoint",
            "cyclic_scheduler", "validate_pose"]
-
-CHECKPOINT_NAME = "last.pt"
 
 
 @dataclass(frozen=True)
@@ -95,39 +91,9 @@ def cyclic_scheduler(optimizer: torch.optim.Optimizer, steps: int, lr_min: float
                                              step_size_down=up, mode="triangular", cycle_momentum=False)
 
 
-def _rng_state() -> dict[str, Any]:
-    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
-    if torch.cuda.is_available():
-        state["cuda"] = torch.cuda.get_rng_state_all()
-    return state
-
-
-def _set_rng_state(state: dict[str, Any]) -> None:
-    torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
-    random.setstate(state["python"])
-    if "cuda" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
-
-
-def _atomic_save(obj: Any, path: Path) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
-
-
 def load_checkpoint(path: str | Path, map_location: str = "cpu") -> dict[str, Any]:
     """A pose training checkpoint (dict with model, optimizer, scheduler, step, configs, keypoints)."""
-    p = Path(path)
-    if not p.is_file():
-        raise SpaceposeError(f"checkpoint not found: {p}")
-    try:
-        ckpt = torch.load(p, map_location=map_location, weights_only=False)
-    except Exception as err:  # torch raises pickle/zip errors of many types
-        raise SpaceposeError(f"cannot read checkpoint {p}: {err}") from err
-    if not isinstance(ckpt, dict) or ckpt.get("kind") != "pose":
-        raise SpaceposeError(f"{p} is not a pose checkpoint (kind={ckpt.get('kind') if isinstance(ckpt, dict) else None!r})")
-    return ckpt
+    return tc.load_checkpoint(path, map_location, kind="pose")
 
 
 def model_from_checkpoint(ckpt: dict[str, Any]) -> tuple[torch.nn.Module, PoseNetConfig]:
@@ -177,34 +143,10 @@ def validate_pose(model: torch.nn.Module, dataset: PoseDataset, device: torch.de
             "val_e_R_median": float(np.median(e_r)) if e_r else nan}
 
 
-def _dist_setup() -> tuple[int, int, int]:
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    if world > 1 and not dist.is_initialized():
-        dist.init_process_group(backend="nccl" if torch.cuda.is_available() else "gloo")
-    rank = dist.get_rank() if dist.is_initialized() else 0
-    return rank, world if dist.is_initialized() else 1, int(os.environ.get("LOCAL_RANK", "0"))
-
-
-def _json(obj: Any) -> Any:
-    return json.loads(json.dumps(obj, default=list))
-
-
 def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
     """Run (or resume) training; returns a summary (final step, last losses, checkpoint path)."""
-    rank, world, local_rank = _dist_setup()
-    if cfg.threads > 0:
-        torch.set_num_threads(cfg.threads)
-    device = torch.device(f"cuda:{local_rank}" if torch.cuda.is_available() else "cpu")
-    if device.type == "cuda":
-        torch.cuda.set_device(device)
-    out = Path(cfg.out)
-    ckpt_path = out / CHECKPOINT_NAME
-    if ckpt_path.exists() and not resume:
-        raise SpaceposeError(f"{ckpt_path} exists: pass --resume to continue it, or choose another --out")
-    if resume and not ckpt_path.exists():
-        raise SpaceposeError(f"--resume given but {ckpt_path} does not exist")
-    if rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
+    ctx = tc.start_run(cfg.out, resume=resume, threads=cfg.threads)
+    rank, world, device, out, ckpt_path = ctx.rank, ctx.world, ctx.device, ctx.out, ctx.ckpt_path
 
     net_cfg = cfg.net_config()
     spec = net_cfg.input_spec(seed=cfg.seed)
@@ -221,30 +163,19 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
         val_set = None
         log.warning("validation disabled: %s", err)
 
-    torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed)
-    random.seed(cfg.seed)
+    tc.seed_all(cfg.seed)
     model = build_model(net_cfg).to(device)
     model.train()
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr_min)
     scheduler = cyclic_scheduler(optimizer, cfg.steps, cfg.lr_min, cfg.lr_max, cfg.cycles)
     step = 0
     if resume:
-        ckpt = load_checkpoint(ckpt_path, map_location=str(device))
-        saved = ckpt.get("train_config", {})
-        for key in ("preset", "net", "fusion", "attention", "batch", "depth_source"):
-            if key in saved and saved[key] != _json(getattr(cfg, key)):
-                raise SpaceposeError(f"cannot resume: {key} differs from the checkpoint ({saved[key]!r} vs {getattr(cfg, key)!r})")
-        model.load_state_dict(ckpt["model"])
-        optimizer.load_state_dict(ckpt["optimizer"])
-        scheduler.load_state_dict(ckpt["scheduler"])
-        step = int(ckpt["step"])
-        _set_rng_state(ckpt["rng"])
+        step = tc.resume_training(load_checkpoint(ckpt_path, map_location=str(device)), cfg,
+                                  ("preset", "net", "fusion", "attention", "batch", "depth_source"), model, optimizer,
+                                  scheduler)
         log.info("resumed %s at step %d", ckpt_path, step)
 
-    net = model
-    if world > 1:
-        net = torch.nn.parallel.DistributedDataParallel(model, device_ids=[local_rank] if device.type == "cuda" else None)
+    net = tc.wrap_ddp(model, ctx)
     names = model.input_names
     sampler = EpochSampler(len(train_set), cfg.seed, rank, world)
     batches_per_epoch = max(sampler.per_rank() // cfg.batch, 1)
@@ -259,24 +190,22 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
             {"train": dataclasses.asdict(cfg), "net": dataclasses.asdict(net_cfg), "loss": dataclasses.asdict(loss_cfg),
              "data": dataclasses.asdict(cfg.data_config(True)), "world_size": world, "device": str(device),
              "commit": git_commit(), "dataset": dataset_doc}, indent=2, default=list))
-    log_fh = open(out / "log.jsonl", "a", encoding="utf-8") if rank == 0 else None
+    log_file = tc.JsonlLog(out / "log.jsonl", rank == 0)
 
     def save() -> None:
         if rank != 0:
             return
-        _atomic_save({"kind": "pose", "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                      "scheduler": scheduler.state_dict(), "step": step, "rng": _rng_state(),
-                      "train_config": _json(dataclasses.asdict(cfg)), "net_config": _json(dataclasses.asdict(net_cfg)),
-                      "input_spec": _json(dataclasses.asdict(spec)), "keypoints": train_set.keypoints.tolist(),
-                      "centre": train_set.centre.tolist(), "target": train_set.target, "radius_m": train_set.radius_m,
-                      "rig": {"image_size": info.get("size"), "focal_px": train_set.focal_px,
-                              "baseline_m": train_set.baseline_m},
-                      "commit": git_commit(), "dataset": dataset_doc}, ckpt_path)
+        tc.atomic_save({"kind": "pose", "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                        "scheduler": scheduler.state_dict(), "step": step, "rng": tc.rng_state(),
+                        "train_config": tc.to_json(dataclasses.asdict(cfg)),
+                        "net_config": tc.to_json(dataclasses.asdict(net_cfg)),
+                        "input_spec": tc.to_json(dataclasses.asdict(spec)), "keypoints": train_set.keypoints.tolist(),
+                        "centre": train_set.centre.tolist(), "target": train_set.target, "radius_m": train_set.radius_m,
+                        "rig": {"image_size": info.get("size"), "focal_px": train_set.focal_px,
+                                "baseline_m": train_set.baseline_m},
+                        "commit": git_commit(), "dataset": dataset_doc}, ckpt_path)
 
-    def write_log(entry: dict[str, Any]) -> None:
-        if log_fh is not None:
-            log_fh.write(json.dumps(entry) + "\n")
-            log_fh.flush()
+    write_log = log_file.write
 
     last: dict[str, float] = {}
     t_last = time.perf_counter()
@@ -316,8 +245,5 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
                     break
     finally:
         save()
-        if log_fh is not None:
-            log_fh.close()
-        if world > 1 and dist.is_initialized():
-            dist.destroy_process_group()
+        tc.finish_run(log_file, ctx)
     return {"step": step, "checkpoint": str(ckpt_path), **last}

@@ -18,29 +18,25 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import math
-import os
-import random
-import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
-import numpy as np
 import torch
-import torch.distributed as dist
-from torch.utils.data import DataLoader, Sampler
+from torch.utils.data import DataLoader
 
-from spacepose.errors import DatasetError, SpaceposeError
+from spacepose.errors import DatasetError
 from spacepose.models.stereo_config import StereoConfig
+from spacepose.tools import training_common as tc
 from spacepose.tools.stereo_data import StereoCropConfig, StereoCropDataset
+from spacepose.tools.training_common import CHECKPOINT_NAME, EpochSampler, git_commit
+
 
 log = logging.getLogger(__name__)
 
-__all__ = ["TrainConfig", "train_stereo", "load_checkpoint", "build_model", "git_commit", "EpochSampler"]
-
-CHECKPOINT_NAME = "last.pt"
+__all__ = ["TrainConfig", "train_stereo", "load_checkpoint", "build_model", "git_commit", "EpochSampler",
+           "CHECKPOINT_NAME"]
 
 
 @dataclass(frozen=True)
@@ -80,81 +76,15 @@ class TrainConfig:
                                 max_disp=float(self.stereo_config().max_disp), augment=augment, train_crop=crop)
 
 
-def git_commit(cwd: str | Path | None = None) -> str | None:
-    """``git rev-parse HEAD`` of the source tree, or None."""
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd or Path(__file__).resolve().parent,
-                             capture_output=True, text=True, timeout=10, check=True)
-        return out.stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
 def build_model(config: StereoConfig) -> torch.nn.Module:
     from spacepose.models.tsca_stereo import TSCAStereo
 
     return TSCAStereo(config)
 
 
-class EpochSampler(Sampler[int]):
-    """Per-epoch permutation of ``range(n)`` from (seed, epoch), sharded over ranks, resumable.
-
-    ``skip`` drops the first ``skip`` indices of this rank's share (used to resume mid-epoch).
-    """
-
-    def __init__(self, n: int, seed: int = 0, rank: int = 0, world: int = 1) -> None:
-        self.n, self.seed, self.rank, self.world = int(n), int(seed), int(rank), int(world)
-        self.epoch, self.skip = 0, 0
-
-    def set_epoch(self, epoch: int, skip: int = 0) -> None:
-        self.epoch, self.skip = int(epoch), int(skip)
-
-    def per_rank(self) -> int:
-        return math.ceil(self.n / self.world)
-
-    def __iter__(self) -> Iterator[int]:
-        g = torch.Generator()
-        g.manual_seed(self.seed * 1_000_003 + self.epoch)
-        perm = torch.randperm(self.n, generator=g).tolist()
-        total = self.per_rank() * self.world
-        perm = (perm * (total // max(len(perm), 1) + 1))[:total]  # pad by repetition
-        share = perm[self.rank::self.world]
-        return iter(share[self.skip:])
-
-    def __len__(self) -> int:
-        return max(self.per_rank() - self.skip, 0)
-
-
-def _rng_state() -> dict[str, Any]:
-    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
-    if torch.cuda.is_available():
-        state["cuda"] = torch.cuda.get_rng_state_all()
-    return state
-
-
-def _set_rng_state(state: dict[str, Any]) -> None:
-    torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
-    random.setstate(state["python"])
-    if "cuda" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
-
-
-def _atomic_save(obj: Any, path: Path) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
-
-
 def load_checkpoint(path: str | Path, map_location: str = "cpu") -> dict[str, Any]:
     """A training checkpoint (dict with model, optimizer, scheduler, step, configs)."""
-    p = Path(path)
-    if not p.is_file():
-        raise SpaceposeError(f"checkpoint not found: {p}")
-    try:
-        return torch.load(p, map_location=map_location, weights_only=False)
-    except Exception as err:  # torch raises pickle/zip errors of many types
-        raise SpaceposeError(f"cannot read checkpoint {p}: {err}") from err
+    return tc.load_checkpoint(path, map_location)
 
 
 def model_from_checkpoint(ckpt: dict[str, Any]) -> tuple[torch.nn.Module, StereoConfig]:
@@ -200,37 +130,13 @@ def validate(model: torch.nn.Module, dataset: StereoCropDataset, device: torch.d
     return {"val_epe": err_sum / max(n, 1), "val_bad3": 100.0 * bad3 / max(n, 1), "val_pixels": float(n)}
 
 
-def _dist_setup() -> tuple[int, int, int]:
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    if world > 1 and not dist.is_initialized():
-        backend = "nccl" if torch.cuda.is_available() else "gloo"
-        dist.init_process_group(backend=backend)
-    rank = dist.get_rank() if dist.is_initialized() else 0
-    local = int(os.environ.get("LOCAL_RANK", "0"))
-    return rank, world if dist.is_initialized() else 1, local
-
-
 def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     """Run (or resume) training; returns a summary dict (final step, last losses, checkpoint path)."""
-    rank, world, local_rank = _dist_setup()
-    if cfg.threads > 0:
-        torch.set_num_threads(cfg.threads)
-    device = torch.device(f"cuda:{local_rank}" if torch.cuda.is_available() else "cpu")
-    if device.type == "cuda":
-        torch.cuda.set_device(device)
-    out = Path(cfg.out)
-    ckpt_path = out / CHECKPOINT_NAME
-    if ckpt_path.exists() and not resume:
-        raise SpaceposeError(f"{ckpt_path} exists: pass --resume to continue it, or choose another --out")
-    if resume and not ckpt_path.exists():
-        raise SpaceposeError(f"--resume given but {ckpt_path} does not exist")
-    if rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
+    ctx = tc.start_run(cfg.out, resume=resume, threads=cfg.threads)
+    rank, world, device, out, ckpt_path = ctx.rank, ctx.world, ctx.device, ctx.out, ctx.ckpt_path
 
     stereo_cfg = cfg.stereo_config()
-    torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed)
-    random.seed(cfg.seed)
+    tc.seed_all(cfg.seed)
     model = build_model(stereo_cfg).to(device)
     model.train()
     optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, eps=1e-8)
@@ -238,21 +144,11 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
                                                     cycle_momentum=False, anneal_strategy="linear")
     step = 0
     if resume:
-        ckpt = load_checkpoint(ckpt_path, map_location=str(device))
-        saved = ckpt.get("train_config", {})
-        for key in ("variant", "preset", "size", "batch", "stereo"):
-            if key in saved and json.loads(json.dumps(saved[key])) != json.loads(json.dumps(getattr(cfg, key))):
-                raise SpaceposeError(f"cannot resume: {key} differs from the checkpoint ({saved[key]!r} vs {getattr(cfg, key)!r})")
-        model.load_state_dict(ckpt["model"])
-        optimizer.load_state_dict(ckpt["optimizer"])
-        scheduler.load_state_dict(ckpt["scheduler"])
-        step = int(ckpt["step"])
-        _set_rng_state(ckpt["rng"])
+        step = tc.resume_training(load_checkpoint(ckpt_path, map_location=str(device)), cfg,
+                                  ("variant", "preset", "size", "batch", "stereo"), model, optimizer, scheduler)
         log.info("resumed %s at step %d", ckpt_path, step)
 
-    net = model
-    if world > 1:
-        net = torch.nn.parallel.DistributedDataParallel(model, device_ids=[local_rank] if device.type == "cuda" else None)
+    net = tc.wrap_ddp(model, ctx)
 
     train_set = StereoCropDataset(cfg.dataset, "train", cfg.crop_config(True), seed=cfg.seed, limit=cfg.limit)
     try:
@@ -267,21 +163,18 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         config_doc = {"train": dataclasses.asdict(cfg), "stereo": stereo_cfg.to_dict(), "world_size": world,
                       "device": str(device), "commit": git_commit(), "train_frames": len(train_set)}
         (out / "config.json").write_text(json.dumps(config_doc, indent=2, default=list))
-    log_fh = open(out / "log.jsonl", "a", encoding="utf-8") if rank == 0 else None
+    log_file = tc.JsonlLog(out / "log.jsonl", rank == 0)
 
     def save() -> None:
         if rank != 0:
             return
-        _atomic_save({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                      "scheduler": scheduler.state_dict(), "step": step, "rng": _rng_state(),
-                      "train_config": json.loads(json.dumps(dataclasses.asdict(cfg), default=list)),
-                      "stereo_config": stereo_cfg.to_dict(), "commit": git_commit(),
-                      "dataset": {"path": str(cfg.dataset), "train_frames": len(train_set)}}, ckpt_path)
+        tc.atomic_save({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                        "scheduler": scheduler.state_dict(), "step": step, "rng": tc.rng_state(),
+                        "train_config": tc.to_json(dataclasses.asdict(cfg)),
+                        "stereo_config": stereo_cfg.to_dict(), "commit": git_commit(),
+                        "dataset": {"path": str(cfg.dataset), "train_frames": len(train_set)}}, ckpt_path)
 
-    def write_log(entry: dict[str, Any]) -> None:
-        if log_fh is not None:
-            log_fh.write(json.dumps(entry) + "\n")
-            log_fh.flush()
+    write_log = log_file.write
 
     last: dict[str, float] = {}
     t_last = time.perf_counter()
@@ -320,8 +213,5 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
                     break
     finally:
         save()
-        if log_fh is not None:
-            log_fh.close()
-        if world > 1 and dist.is_initialized():
-            dist.destroy_process_group()
+        tc.finish_run(log_file, ctx)
     return {"step": step, "checkpoint": str(ckpt_path), **last}

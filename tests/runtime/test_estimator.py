@@ -81,6 +81,29 @@ def test_prior_skips_coarse_pass(estimator, monkeypatch):
     assert hints[-1] is None
 
 
+def test_prior_that_lost_the_target_falls_back_to_the_coarse_pass(estimator, monkeypatch):
+    """Frames that are not a sequence: a stale prior window must not cost the pose."""
+    hints = []
+    original = estimator.stereo.match
+
+    def spy(left, right, roi_hint=None):
+        hints.append(roi_hint)
+        return original(left, right, roi_hint=roi_hint)
+
+    monkeypatch.setattr(estimator.stereo, "match", spy)
+    left, right = synthetic_pair()
+    assert estimator.estimate(left, right).valid
+    # a stale prior: the previous pose put the target in the bottom-right corner, where this frame
+    # holds only black sky
+    from spacepose.stereo_stage import RoiHint
+
+    monkeypatch.setattr(estimator, "_roi_hint", lambda: RoiHint((560, 400, 640, 480), 20.0, 40.0))
+    result = estimator.estimate(left, right)
+    assert hints[1] == RoiHint((560, 400, 640, 480), 20.0, 40.0) and hints[2] is None  # prior, then coarse
+    assert result.valid and result.status == "ok"
+    assert result.timings_ms["stereo"] > 0
+
+
 def test_no_prior_option(bundle, monkeypatch):
     est = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, use_prior=False)
     left, right = synthetic_pair()
