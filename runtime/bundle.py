@@ -146,6 +146,12 @@ class VotingConfig:
     max_fit_rms_factor: float = 1.0
     seg_threshold: float = 0.5
     depth_margin: float = 0.2
+    #: keypoints (besides the centre) whose votes must agree before a fit is trusted; more than
+    #: the 3 a rigid fit needs guards against near-symmetric (180°-flipped) solutions
+    min_keypoints: int = 3
+    #: poses below this confidence are reported ``weak_votes`` (set from the error-vs-confidence
+    #: table of the evaluation; 0 keeps every pose that passes the other checks)
+    min_confidence: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -410,10 +416,14 @@ def _parse_voting(section: Any) -> VotingConfig:
         elif isinstance(default, int):
             value = _integer(value, where)
         else:
-            value = _number(value, where)
+            value = _number(value, where, positive=name != "min_confidence")
         values[name] = value
     if values["kernel"] not in ("flat", "gaussian"):
         raise BundleError(f"bundle.json: voting.kernel must be 'flat' or 'gaussian', got {values['kernel']!r}")
+    if values["min_keypoints"] < 3:
+        raise BundleError(f"bundle.json: voting.min_keypoints must be >= 3, got {values['min_keypoints']!r}")
+    if not 0.0 <= values["min_confidence"] < 1.0:
+        raise BundleError(f"bundle.json: voting.min_confidence must be in [0, 1), got {values['min_confidence']!r}")
     for name in ("min_cluster_fraction", "min_keypoint_fraction", "seg_threshold"):
         if not 0.0 < values[name] < 1.0:
             raise BundleError(f"bundle.json: voting.{name} must be in (0, 1), got {values[name]!r}")

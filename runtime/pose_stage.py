@@ -24,7 +24,8 @@ Validity, checked in this order (the first failure is the status):
 ``no_target``        no point is segmented as target
 ``too_few_points``   fewer than ``min_points`` target points, or centre inliers
 ``weak_votes``       centre cluster holds < ``min_cluster_fraction`` of the target points,
-                     or fewer than 3 keypoints hold >= ``min_keypoint_fraction`` support
+                     or fewer than ``min_keypoints`` keypoints hold >= ``min_keypoint_fraction``
+                     support, or (after the checks below) the confidence is < ``min_confidence``
 ``fit_residual``     the fit failed, or its RMS residual exceeds ``max_fit_rms_factor * h``
 ``out_of_range``     the fitted distance ``||t||`` lies outside the bundle's distance range
                      widened by ``depth_margin`` (relative), or the fitted centre is farther
@@ -211,7 +212,7 @@ def solve_pose(
     kp_fraction = voted.support / float(n_inliers)
     base.update(keypoints=voted.keypoints, keypoint_support=voted.support)
     strong = np.isfinite(voted.keypoints).all(axis=1) & (kp_fraction >= config.min_keypoint_fraction)
-    if int(strong.sum()) < 3:
+    if int(strong.sum()) < max(3, config.min_keypoints):
         return _invalid("weak_votes", **base)
 
     src = np.vstack([np.asarray(model_keypoints, dtype=np.float64)[strong], np.asarray(model_centre, dtype=np.float64)])
@@ -237,5 +238,8 @@ def solve_pose(
         "points": float(min(1.0, n_inliers / (4.0 * config.min_points))),
     }
     confidence = float(np.clip(np.prod(list(factors.values())), 0.0, 1.0))
+    if confidence < config.min_confidence:
+        logger.debug("pose rejected: confidence %.3f < %.3f", confidence, config.min_confidence)
+        return _invalid("weak_votes", factors=factors, **base)
     return PoseStageResult(R=fit.R, t=fit.t, valid=True, status="ok", confidence=confidence,
                            factors=factors, **base)

@@ -90,6 +90,26 @@ class TestSolvePose:
         res = solve_pose(pts, seg, kp, ctr, KP, CENTRE, **COMMON)
         assert not res.valid and res.status == "weak_votes"
 
+    def test_min_keypoints_rejects_fits_on_too_few_agreeing_keypoints(self):
+        R, t = _rotation(8), np.array([0.0, 0.0, 14.0])
+        pts, seg, kp, ctr = _scene(R, t)
+        kp[0, 4:] += np.random.default_rng(3).uniform(-20, 20, size=kp[0, 4:].shape).astype(np.float32)
+        loose = solve_pose(pts, seg, kp, ctr, KP, CENTRE, **COMMON)          # 4 agreeing keypoints >= 3
+        assert loose.valid
+        strict = dict(COMMON, config=VotingConfig(min_points=32, min_keypoints=6))
+        res = solve_pose(pts, seg, kp, ctr, KP, CENTRE, **strict)
+        assert not res.valid and res.status == "weak_votes" and np.all(np.isnan(res.t))
+
+    def test_min_confidence_turns_a_weak_pose_invalid(self):
+        R, t = _rotation(3), np.array([0.0, 0.0, 15.0])
+        noisy = solve_pose(*_scene(R, t, noise=0.1), KP, CENTRE, **COMMON)
+        assert noisy.valid and noisy.confidence < 0.99
+        above = dict(COMMON, config=VotingConfig(min_points=32, min_confidence=noisy.confidence + 1e-3))
+        below = dict(COMMON, config=VotingConfig(min_points=32, min_confidence=noisy.confidence - 1e-3))
+        rejected = solve_pose(*_scene(R, t, noise=0.1), KP, CENTRE, **above)
+        assert not rejected.valid and rejected.status == "weak_votes" and rejected.confidence == 0.0
+        assert solve_pose(*_scene(R, t, noise=0.1), KP, CENTRE, **below).valid
+
     def test_flip_guard_mirrored_votes(self):
         """Votes for a mirror image of the model: the fit stays a rotation and is rejected."""
         R, t = _rotation(7), np.array([0.0, 0.0, 20.0])
