@@ -152,6 +152,10 @@ class VotingConfig:
     #: poses below this confidence are reported ``weak_votes`` (set from the error-vs-confidence
     #: table of the evaluation; 0 keeps every pose that passes the other checks)
     min_confidence: float = 0.0
+    #: share of the stereo points that must lie within one bandwidth of the target's surface
+    #: (``target.surface_points``) placed at the fitted pose; 0 disables the check. It compares
+    #: the pose with the data, not with the votes, so a confident but wrong fit is caught.
+    min_surface_fitness: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -416,7 +420,7 @@ def _parse_voting(section: Any) -> VotingConfig:
         elif isinstance(default, int):
             value = _integer(value, where)
         else:
-            value = _number(value, where, positive=name != "min_confidence")
+            value = _number(value, where, positive=name not in ("min_confidence", "min_surface_fitness"))
         values[name] = value
     if values["kernel"] not in ("flat", "gaussian"):
         raise BundleError(f"bundle.json: voting.kernel must be 'flat' or 'gaussian', got {values['kernel']!r}")
@@ -424,6 +428,8 @@ def _parse_voting(section: Any) -> VotingConfig:
         raise BundleError(f"bundle.json: voting.min_keypoints must be >= 3, got {values['min_keypoints']!r}")
     if not 0.0 <= values["min_confidence"] < 1.0:
         raise BundleError(f"bundle.json: voting.min_confidence must be in [0, 1), got {values['min_confidence']!r}")
+    if not 0.0 <= values["min_surface_fitness"] <= 1.0:
+        raise BundleError(f"bundle.json: voting.min_surface_fitness must be in [0, 1], got {values['min_surface_fitness']!r}")
     for name in ("min_cluster_fraction", "min_keypoint_fraction", "seg_threshold"):
         if not 0.0 < values[name] < 1.0:
             raise BundleError(f"bundle.json: voting.{name} must be in (0, 1), got {values[name]!r}")

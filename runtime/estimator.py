@@ -36,7 +36,7 @@ from . import roi
 from .bundle import ModelBundle, load_bundle
 from .errors import ShapeError
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
-from .pose_stage import PoseStageResult, solve_pose
+from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 
 __all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
@@ -379,6 +379,13 @@ class PoseEstimator:
                 distance_range_m=bundle.distance_range_m, focal_px=self.focal_px, baseline_m=self.baseline_m,
                 sigma_d_px=voting.sigma_d_px / max(stereo.scale, 1e-9), offset_sign=bundle.pose.offset_sign,
                 seed=self.seed)
+        if stage.valid and voting.min_surface_fitness > 0.0 and len(bundle.surface_points):
+            with timer.stage("verify"):
+                fitness = surface_fitness(stage.R, stage.t, xyz, np.asarray(bundle.surface_points), stage.bandwidth)
+            if fitness < voting.min_surface_fitness:
+                logger.info("pose rejected: surface fitness %.2f < %.2f", fitness, voting.min_surface_fitness)
+                return "fit_residual", None, stereo.window, (
+                    f"only {fitness:.0%} of the stereo points lie on the target surface at the fitted pose")
         if stage.valid and self.refine and self._surface_normals is not None:
             with timer.stage("refine"):
                 R, t = refine_icp(stage.R, stage.t, xyz, np.asarray(bundle.surface_points),

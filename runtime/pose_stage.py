@@ -57,7 +57,7 @@ from .errors import ShapeError, check_shape
 from .fit import fit_rigid
 from .voting import centre_first_inliers, vote_keypoints
 
-__all__ = ["POSE_STATUSES", "PoseStageResult", "voting_bandwidth", "depth_sigma", "solve_pose"]
+__all__ = ["POSE_STATUSES", "PoseStageResult", "voting_bandwidth", "depth_sigma", "solve_pose", "surface_fitness"]
 
 logger = logging.getLogger(__name__)
 
@@ -243,3 +243,26 @@ def solve_pose(
         return _invalid("weak_votes", factors=factors, **base)
     return PoseStageResult(R=fit.R, t=fit.t, valid=True, status="ok", confidence=confidence,
                            factors=factors, **base)
+
+
+def surface_fitness(R: np.ndarray, t: np.ndarray, points: np.ndarray, surface: np.ndarray, tolerance: float,
+                    chunk: int = 512) -> float:
+    """Share of ``points`` (N, 3, camera frame) within ``tolerance`` metres of the target's surface.
+
+    ``surface`` (S, 3) are object-frame surface samples, placed by the pose ``X = R s + t``. A
+    correct pose puts the observed target points on the surface (fitness near 1, less the stereo
+    outliers); a wrong one leaves most of them off it. Brute-force nearest neighbours in chunks.
+    """
+    check_shape(points, (None, 3), "points")
+    check_shape(surface, (None, 3), "surface")
+    if len(points) == 0 or len(surface) == 0 or not np.all(np.isfinite(R)) or not np.all(np.isfinite(t)):
+        return 0.0
+    placed = np.asarray(surface, dtype=np.float64) @ np.asarray(R, dtype=np.float64).T + np.asarray(t, dtype=np.float64)
+    pts = np.asarray(points, dtype=np.float64)
+    tol2 = float(tolerance) ** 2
+    hits = 0
+    for start in range(0, len(pts), chunk):
+        block = pts[start:start + chunk]
+        d2 = ((block[:, None, :] - placed[None, :, :]) ** 2).sum(axis=-1)
+        hits += int((d2.min(axis=1) <= tol2).sum())
+    return hits / float(len(pts))

@@ -44,13 +44,14 @@ class TestLoad:
         assert b.bbox_corners.shape == (8, 3)
         assert b.stereo_path.is_file() and b.pose_path.is_file()
 
-    def test_default_bundle_missing_or_loadable(self):
-        try:
-            b = load_bundle()
-        except BundleError as err:
-            assert "default" in str(err) or "missing" in str(err)
-        else:
-            assert b.path.name == "default"
+    def test_shipped_default_bundle_loads_and_fits_the_paper_rig(self):
+        from spacepose.calibration.rig import load_rig, PAPER_RIG_PATH
+
+        b = load_bundle()
+        assert b.path.name == "default" and b.target_name == "tdrs"
+        assert b.stereo_path.is_file() and b.pose_path.is_file()
+        assert b.keypoints.shape == (8, 3) and b.distance_range_m == (10.0, 50.0)
+        b.check_fits(load_rig(PAPER_RIG_PATH))  # the paper rig at 1280x960: no BundleError
 
     def test_missing_folder(self, tmp_path):
         with pytest.raises(BundleError, match="does not exist"):

@@ -104,6 +104,25 @@ def test_prior_that_lost_the_target_falls_back_to_the_coarse_pass(estimator, mon
     assert result.timings_ms["stereo"] > 0
 
 
+@pytest.mark.parametrize("surface, valid", [
+    # a dense grid filling the space around the object: every observed point lies "on" it
+    (np.stack(np.meshgrid(*[np.arange(-4.0, 4.01, 0.3)] * 3, indexing="ij"), -1).reshape(-1, 3), True),
+    # a surface far from where the fitted pose puts the target: the data contradict the pose
+    (np.full((50, 3), 100.0) + np.arange(50)[:, None] * 0.01, False),
+])
+def test_surface_fitness_check_compares_the_pose_with_the_data(tmp_path, surface, valid):
+    from _bundle_fixtures import manifest
+
+    target = dict(manifest()["target"], surface_points=surface.tolist())
+    folder = make_bundle(tmp_path / "b", manifest_overrides={
+        "target": target, "voting": {"min_points": 32, "min_surface_fitness": 0.5}})
+    est = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(folder), threads=1)
+    res = est.estimate(*synthetic_pair())
+    assert res.valid is valid and "verify" in res.timings_ms
+    if not valid:
+        assert res.status == "fit_residual" and "target surface" in res.detail and np.all(np.isnan(res.t))
+
+
 def test_no_prior_option(bundle, monkeypatch):
     est = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, use_prior=False)
     left, right = synthetic_pair()

@@ -186,3 +186,25 @@ class TestSolvePose:
         assert set(f) == {"cluster", "keypoints", "fit", "points"}
         assert res.confidence == pytest.approx(math.prod(f.values()))
         assert all(0.0 <= v <= 1.0 for v in f.values())
+
+
+class TestSurfaceFitness:
+    SURFACE = np.random.default_rng(0).uniform(-2.0, 2.0, size=(600, 3)) * np.array([1.0, 0.6, 0.2])
+
+    def test_right_pose_fits_wrong_pose_does_not(self):
+        from spacepose.pose_stage import surface_fitness
+
+        R, t = _rotation(11), np.array([1.0, -0.5, 25.0])
+        observed = self.SURFACE[:300] @ R.T + t + np.random.default_rng(1).normal(0, 0.02, (300, 3))
+        assert surface_fitness(R, t, observed, self.SURFACE, 0.1) > 0.95
+        flipped = R @ np.diag([-1.0, -1.0, 1.0])  # 180 deg about the body z axis: a different surface
+        assert surface_fitness(flipped, t + np.array([0.0, 0.0, 1.5]), observed, self.SURFACE, 0.1) < 0.3
+        assert surface_fitness(R, t + np.array([0.0, 0.0, 3.0]), observed, self.SURFACE, 0.1) == 0.0
+
+    def test_degenerate_inputs(self):
+        from spacepose.pose_stage import surface_fitness
+
+        assert surface_fitness(np.eye(3), np.zeros(3), np.zeros((0, 3)), self.SURFACE, 0.1) == 0.0
+        assert surface_fitness(np.full((3, 3), np.nan), np.zeros(3), self.SURFACE, self.SURFACE, 0.1) == 0.0
+        with pytest.raises(ShapeError, match="points"):
+            surface_fitness(np.eye(3), np.zeros(3), np.zeros((5, 2)), self.SURFACE, 0.1)
