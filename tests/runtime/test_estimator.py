@@ -57,7 +57,9 @@ def test_calib_from_file_and_grey_uint16(bundle, tmp_path):
     assert est.estimate(left.astype(np.float32), right.astype(np.float32)).valid
 
 
-def test_prior_skips_coarse_pass(estimator, monkeypatch):
+@pytest.fixture()
+def stereo_hints(estimator, monkeypatch):
+    """The ROI hint of every stereo pass the estimator runs, in order."""
     hints = []
     original = estimator.stereo.match
 
@@ -66,6 +68,11 @@ def test_prior_skips_coarse_pass(estimator, monkeypatch):
         return original(left, right, roi_hint=roi_hint)
 
     monkeypatch.setattr(estimator.stereo, "match", spy)
+    return hints
+
+
+def test_prior_skips_coarse_pass(estimator, stereo_hints):
+    hints = stereo_hints
     left, right = synthetic_pair()
     assert estimator.estimate(left, right).valid
     estimator.estimate(left, right)
@@ -81,16 +88,9 @@ def test_prior_skips_coarse_pass(estimator, monkeypatch):
     assert hints[-1] is None
 
 
-def test_prior_that_lost_the_target_falls_back_to_the_coarse_pass(estimator, monkeypatch):
+def test_prior_that_lost_the_target_falls_back_to_the_coarse_pass(estimator, stereo_hints, monkeypatch):
     """Frames that are not a sequence: a stale prior window must not cost the pose."""
-    hints = []
-    original = estimator.stereo.match
-
-    def spy(left, right, roi_hint=None):
-        hints.append(roi_hint)
-        return original(left, right, roi_hint=roi_hint)
-
-    monkeypatch.setattr(estimator.stereo, "match", spy)
+    hints = stereo_hints
     left, right = synthetic_pair()
     assert estimator.estimate(left, right).valid
     # a stale prior: the previous pose put the target in the bottom-right corner, where this frame
