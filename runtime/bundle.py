@@ -76,6 +76,7 @@ __all__ = [
     "read_graph_metadata",
     "expected_disparity_px",
     "DISPARITY_TOLERANCE",
+    "COARSE_DETECTION_FLOOR_PX",
 ]
 
 logger = logging.getLogger(__name__)
@@ -84,6 +85,9 @@ SCHEMA = "spacepose.bundle/1"
 DEFAULT_BUNDLE_DIR = Path(__file__).resolve().parent / "bundles" / "default"
 #: relative slack on the trained disparity range accepted by :meth:`ModelBundle.check_fits`
 DISPARITY_TOLERANCE = 0.25
+#: smallest coarse-pass disparity (graph input px) at which the target still stands out of the
+#: zero-disparity background (1.5x the stereo stage's 2 px detection threshold)
+COARSE_DETECTION_FLOOR_PX = 3.0
 REQUIRED_FILES = ("bundle.json", "MODEL_CARD.md")
 
 
@@ -239,7 +243,9 @@ class ModelBundle:
 
         For the target anywhere in ``distance_range_m``, the disparity in graph input pixels of the
         coarse (letterboxed full frame) and the fine (ROI window) pass must lie within the trained
-        range widened by :data:`DISPARITY_TOLERANCE`.
+        range widened by :data:`DISPARITY_TOLERANCE`. The coarse pass only has to *find* the target,
+        so its low end may go down to :data:`COARSE_DETECTION_FLOOR_PX` (the fine pass, whose
+        disparity does not depend on the focal length, keeps the trained range).
 
         Args:
             rig: a :class:`~spacepose.calibration.rig.StereoRig` (focal from ``M1``, baseline
@@ -253,7 +259,8 @@ class ModelBundle:
         lo_ok, hi_ok = lo * (1.0 - DISPARITY_TOLERANCE), hi * (1.0 + DISPARITY_TOLERANCE)
         near, far = self.distance_range_m
         for name, (d_lo, d_hi) in expected_disparity_px(self, focal, baseline, size).items():
-            if d_lo < lo_ok or d_hi > hi_ok:
+            floor = min(lo_ok, COARSE_DETECTION_FLOOR_PX) if name == "coarse" else lo_ok
+            if d_lo < floor or d_hi > hi_ok:
                 raise BundleError(
                     f"bundle {self.path.name!r} does not fit this calibration: at {near:g}-{far:g} m the "
                     f"{name} pass would see {d_lo:.1f}-{d_hi:.1f} px disparity (f={focal:.1f} px, "

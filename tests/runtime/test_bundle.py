@@ -52,6 +52,11 @@ class TestLoad:
         assert b.stereo_path.is_file() and b.pose_path.is_file()
         assert b.keypoints.shape == (8, 3) and b.distance_range_m == (10.0, 50.0)
         b.check_fits(load_rig(PAPER_RIG_PATH))  # the paper rig at 1280x960: no BundleError
+        # a rig we never trained on: half the baseline; the coarse pass still sees >= 3 px at 50 m
+        base = load_rig(PAPER_RIG_PATH)
+        b.check_fits(StereoRig(base.M1, base.D1, base.M2, base.D2, base.R, base.T / 2.0, base.image_size))
+        with pytest.raises(BundleError, match="coarse"):  # a fifth of it: the target would vanish at 50 m
+            b.check_fits(StereoRig(base.M1, base.D1, base.M2, base.D2, base.R, base.T / 5.0, base.image_size))
 
     def test_missing_folder(self, tmp_path):
         with pytest.raises(BundleError, match="does not exist"):
