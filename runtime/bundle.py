@@ -107,28 +107,15 @@ class StereoGraphConfig:
 
 @dataclass(frozen=True)
 class PoseGraphConfig:
-    """The pose graph's contract: its input spec (what :mod:`spacepose.pose_inputs` builds) and
-    keypoint count. ``offset_sign``: a vote is ``point + offset_sign * offset`` (the graph's
-    convention is ``offset = keypoint - point``, sign +1)."""
+    """The pose graph's contract: its input spec (what :mod:`spacepose.pose_inputs` builds; its
+    fields sit flat in the ``pose`` section of bundle.json) and keypoint count. ``offset_sign``: a
+    vote is ``point + offset_sign * offset`` (the graph's convention is ``offset = keypoint - point``,
+    sign +1)."""
 
     file: str = "pose.onnx"
     n_keypoints: int = 8
     offset_sign: int = 1
-    n_points: int = 1024
-    k: int = 16
-    n_levels: int = 3
-    ratio: int = 4
-    crop_size: tuple[int, int] = (128, 128)
-    xyz_scale: float = 2.5
-    use_normals: bool = False
-    sampling: str = "fps"
-    seed: int = 0
-
-    @property
-    def input_spec(self) -> PoseInputSpec:
-        return PoseInputSpec(n_points=self.n_points, k=self.k, n_levels=self.n_levels, ratio=self.ratio,
-                             crop_size=self.crop_size, xyz_scale=self.xyz_scale,
-                             use_normals=self.use_normals, sampling=self.sampling, seed=self.seed)
+    input_spec: PoseInputSpec = field(default_factory=PoseInputSpec)
 
 
 @dataclass(frozen=True)
@@ -381,17 +368,18 @@ def _parse_pose(section: Any) -> PoseGraphConfig:
     where = "pose"
     if not isinstance(section, Mapping):
         raise BundleError(f"bundle.json: pose must be an object, got {type(section).__name__}")
-    data = _optional_fields(PoseGraphConfig, section, where)
+    known = {"file", "n_keypoints", "offset_sign", *PoseInputSpec.__dataclass_fields__}
+    unknown = sorted(set(section) - known)
+    if unknown:
+        raise BundleError(f"bundle.json: unknown keys in {where}: {unknown}; valid: {sorted(known)}")
+    data = dict(section)
     sign = data.get("offset_sign", 1)
     if sign not in (1, -1) or isinstance(sign, bool):
         raise BundleError(f"bundle.json: pose.offset_sign must be 1 or -1, got {sign!r}")
     use_normals = data.get("use_normals", False)
     if not isinstance(use_normals, bool):
         raise BundleError(f"bundle.json: pose.use_normals must be true/false, got {use_normals!r}")
-    out = PoseGraphConfig(
-        file=str(_get(section, "file", where)),
-        n_keypoints=_integer(_get(section, "n_keypoints", where), "pose.n_keypoints", minimum=3),
-        offset_sign=int(sign),
+    fields = dict(
         n_points=_integer(_get(section, "n_points", where), "pose.n_points"),
         k=_integer(_get(section, "k", where), "pose.k"),
         n_levels=_integer(_get(section, "n_levels", where), "pose.n_levels"),
@@ -403,9 +391,15 @@ def _parse_pose(section: Any) -> PoseGraphConfig:
         seed=_integer(data.get("seed", 0), "pose.seed", minimum=0),
     )
     try:
-        out.input_spec
+        spec = PoseInputSpec(**fields)
     except ValueError as err:
         raise BundleError(f"bundle.json: invalid pose input spec: {err}") from err
+    out = PoseGraphConfig(
+        file=str(_get(section, "file", where)),
+        n_keypoints=_integer(_get(section, "n_keypoints", where), "pose.n_keypoints", minimum=3),
+        offset_sign=int(sign),
+        input_spec=spec,
+    )
     return out
 
 
@@ -526,10 +520,9 @@ def _check_metadata(bundle: ModelBundle, kind: str, meta: Mapping[str, Any]) -> 
                   "max_disp": s.max_disp}
     else:
         p = bundle.pose
-        expect = {"n_points": p.n_points, "crop_size": list(p.crop_size), "k": p.k, "n_levels": p.n_levels,
-                  "ratio": p.ratio, "xyz_scale": p.xyz_scale, "use_normals": p.use_normals,
-                  "sampling": p.sampling, "n_keypoints": p.n_keypoints, "keypoints": bundle.keypoints,
-                  "centre": bundle.centre}
+        expect = {name: getattr(p.input_spec, name) for name in PoseInputSpec.__dataclass_fields__ if name != "seed"}
+        expect["crop_size"] = list(p.input_spec.crop_size)
+        expect.update({"n_keypoints": p.n_keypoints, "keypoints": bundle.keypoints, "centre": bundle.centre})
     expect["target"] = bundle.target_name
     for key, value in expect.items():
         if key in meta and not _same(meta[key], value):
