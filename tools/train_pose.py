@@ -18,14 +18,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from torch.utils.data import DataLoader
 
 from spacepose.errors import DatasetError, SpaceposeError
 from spacepose.models.pose_config import PoseNetConfig
@@ -178,7 +176,6 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
     net = tc.wrap_ddp(model, ctx)
     names = model.input_names
     sampler = EpochSampler(len(train_set), cfg.seed, rank, world)
-    batches_per_epoch = max(sampler.per_rank() // cfg.batch, 1)
     if sampler.per_rank() < cfg.batch:
         raise SpaceposeError(f"batch {cfg.batch} exceeds the {sampler.per_rank()} training frames per rank")
     info = train_set.info
@@ -192,7 +189,7 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
              "commit": git_commit(), "dataset": dataset_doc}, indent=2, default=list))
     log_file = tc.JsonlLog(out / "log.jsonl", rank == 0)
 
-    def save() -> None:
+    def save(step: int) -> None:
         if rank != 0:
             return
         tc.atomic_save({"kind": "pose", "model": model.state_dict(), "optimizer": optimizer.state_dict(),
@@ -205,45 +202,23 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
                                 "baseline_m": train_set.baseline_m},
                         "commit": git_commit(), "dataset": dataset_doc}, ckpt_path)
 
-    write_log = log_file.write
+    def train_step(batch: dict[str, Any]) -> tuple[dict[str, float], float, float]:
+        seg, kp, ctr = _forward(net, names, batch, device)
+        loss, parts = pose_loss(seg, kp, ctr, batch["labels"].to(device), batch["kp_targets"].to(device),
+                                batch["ctr_targets"].to(device), loss_cfg)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
+        lr = scheduler.get_last_lr()[0]
+        optimizer.step()
+        scheduler.step()
+        values = {"loss": float(loss.detach()), **{k: float(v.detach()) for k, v in parts.items()},
+                  "target_share": float((batch["labels"] > 0).float().mean())}
+        return values, float(grad_norm), lr
 
-    last: dict[str, float] = {}
-    t_last = time.perf_counter()
-    try:
-        while step < cfg.steps:
-            epoch, pos = divmod(step, batches_per_epoch)
-            sampler.set_epoch(epoch, skip=pos * cfg.batch)
-            train_set.set_epoch(epoch)
-            loader = DataLoader(train_set, batch_size=cfg.batch, sampler=sampler, num_workers=cfg.workers,
-                                drop_last=True, persistent_workers=False)
-            for batch in loader:
-                seg, kp, ctr = _forward(net, names, batch, device)
-                loss, parts = pose_loss(seg, kp, ctr, batch["labels"].to(device), batch["kp_targets"].to(device),
-                                        batch["ctr_targets"].to(device), loss_cfg)
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
-                lr = scheduler.get_last_lr()[0]
-                optimizer.step()
-                scheduler.step()
-                step += 1
-                last = {"loss": float(loss.detach()), **{k: float(v.detach()) for k, v in parts.items()},
-                        "target_share": float((batch["labels"] > 0).float().mean())}
-                if step % cfg.log_every == 0 or step == cfg.steps:
-                    now = time.perf_counter()
-                    write_log({"step": step, **last, "grad_norm": float(grad_norm), "lr": lr,
-                               "s_per_step": (now - t_last) / cfg.log_every, "epoch": epoch})
-                    t_last = now
-                    log.info("step %d loss %.4f lr %.2e", step, last["loss"], lr)
-                if val_set is not None and rank == 0 and (step % cfg.val_every == 0 or step == cfg.steps):
-                    v = validate_pose(model, val_set, device, loss_cfg)
-                    write_log({"step": step, **v})
-                    last.update(v)
-                if step % cfg.ckpt_every == 0:
-                    save()
-                if step >= cfg.steps:
-                    break
-    finally:
-        save()
-        tc.finish_run(log_file, ctx)
+    validate_fn = None if val_set is None else (lambda: validate_pose(model, val_set, device, loss_cfg))
+    step, last = tc.run_steps(step=step, steps=cfg.steps, batch=cfg.batch, workers=cfg.workers, train_set=train_set,
+                              sampler=sampler, train_step=train_step, validate=validate_fn, save=save,
+                              log_file=log_file, ctx=ctx, log_every=cfg.log_every, val_every=cfg.val_every,
+                              ckpt_every=cfg.ckpt_every)
     return {"step": step, "checkpoint": str(ckpt_path), **last}

@@ -18,13 +18,11 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import torch
-from torch.utils.data import DataLoader
 
 from spacepose.errors import DatasetError
 from spacepose.models.stereo_config import StereoConfig
@@ -158,14 +156,13 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         val_set = None
         log.warning("no test split: validation disabled")
     sampler = EpochSampler(len(train_set), cfg.seed, rank, world)
-    batches_per_epoch = max(sampler.per_rank() // cfg.batch, 1)
     if rank == 0:
         config_doc = {"train": dataclasses.asdict(cfg), "stereo": stereo_cfg.to_dict(), "world_size": world,
                       "device": str(device), "commit": git_commit(), "train_frames": len(train_set)}
         (out / "config.json").write_text(json.dumps(config_doc, indent=2, default=list))
     log_file = tc.JsonlLog(out / "log.jsonl", rank == 0)
 
-    def save() -> None:
+    def save(step: int) -> None:
         if rank != 0:
             return
         tc.atomic_save({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
@@ -174,44 +171,21 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
                         "stereo_config": stereo_cfg.to_dict(), "commit": git_commit(),
                         "dataset": {"path": str(cfg.dataset), "train_frames": len(train_set)}}, ckpt_path)
 
-    write_log = log_file.write
+    def train_step(batch: dict[str, Any]) -> tuple[dict[str, float], float, float]:
+        left, right = batch["left"].to(device), batch["right"].to(device)
+        gt, valid = batch["disparity"].to(device), batch["valid"].to(device)
+        init_disp, preds = net(left, right, iters=cfg.iters)
+        loss, metrics = _sequence_loss(init_disp, preds, gt, valid, stereo_cfg.max_disp)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
+        optimizer.step()
+        scheduler.step()
+        return {"loss": float(loss.detach()), **_to_float(metrics)}, float(grad_norm), scheduler.get_last_lr()[0]
 
-    last: dict[str, float] = {}
-    t_last = time.perf_counter()
-    try:
-        while step < cfg.steps:
-            epoch, pos = divmod(step, batches_per_epoch)
-            sampler.set_epoch(epoch, skip=pos * cfg.batch)
-            train_set.set_epoch(epoch)
-            loader = DataLoader(train_set, batch_size=cfg.batch, sampler=sampler, num_workers=cfg.workers,
-                                drop_last=True, persistent_workers=False)
-            for batch in loader:
-                left, right = batch["left"].to(device), batch["right"].to(device)
-                gt, valid = batch["disparity"].to(device), batch["valid"].to(device)
-                init_disp, preds = net(left, right, iters=cfg.iters)
-                loss, metrics = _sequence_loss(init_disp, preds, gt, valid, stereo_cfg.max_disp)
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
-                optimizer.step()
-                scheduler.step()
-                step += 1
-                last = {"loss": float(loss.detach()), **_to_float(metrics)}
-                if step % cfg.log_every == 0 or step == cfg.steps:
-                    now = time.perf_counter()
-                    write_log({"step": step, **last, "grad_norm": float(grad_norm), "lr": scheduler.get_last_lr()[0],
-                               "s_per_step": (now - t_last) / cfg.log_every, "epoch": epoch})
-                    t_last = now
-                    log.info("step %d loss %.4f", step, last["loss"])
-                if val_set is not None and rank == 0 and (step % cfg.val_every == 0 or step == cfg.steps):
-                    v = validate(model, val_set, device, stereo_cfg.iters or cfg.iters)
-                    write_log({"step": step, **v})
-                    last.update(v)
-                if step % cfg.ckpt_every == 0:
-                    save()
-                if step >= cfg.steps:
-                    break
-    finally:
-        save()
-        tc.finish_run(log_file, ctx)
+    validate_fn = None if val_set is None else (lambda: validate(model, val_set, device, stereo_cfg.iters or cfg.iters))
+    step, last = tc.run_steps(step=step, steps=cfg.steps, batch=cfg.batch, workers=cfg.workers, train_set=train_set,
+                              sampler=sampler, train_step=train_step, validate=validate_fn, save=save,
+                              log_file=log_file, ctx=ctx, log_every=cfg.log_every, val_every=cfg.val_every,
+                              ckpt_every=cfg.ckpt_every)
     return {"step": step, "checkpoint": str(ckpt_path), **last}

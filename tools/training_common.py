@@ -10,13 +10,14 @@ import logging
 import math
 import os
 import random
+import time
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 import torch
 import torch.distributed as dist
-from torch.utils.data import Sampler
+from torch.utils.data import DataLoader, Sampler
 
 from spacepose.errors import SpaceposeError
 from spacepose.export.metadata import git_commit
@@ -25,7 +26,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["CHECKPOINT_NAME", "EpochSampler", "RunContext", "git_commit", "to_json", "rng_state", "set_rng_state",
            "seed_all", "atomic_save", "load_checkpoint", "dist_setup", "start_run", "resume_training", "wrap_ddp",
-           "JsonlLog", "finish_run"]
+           "JsonlLog", "finish_run", "run_steps"]
 
 CHECKPOINT_NAME = "last.pt"
 
@@ -187,3 +188,47 @@ def finish_run(log_file: JsonlLog, ctx: RunContext) -> None:
     log_file.close()
     if ctx.world > 1 and dist.is_initialized():
         dist.destroy_process_group()
+
+
+def run_steps(*, step: int, steps: int, batch: int, workers: int, train_set: Any, sampler: EpochSampler,
+              train_step: Callable[[dict[str, Any]], tuple[dict[str, float], float, float]],
+              validate: Callable[[], dict[str, float]] | None, save: Callable[[int], None], log_file: JsonlLog,
+              ctx: RunContext, log_every: int, val_every: int, ckpt_every: int) -> tuple[int, dict[str, float]]:
+    """The epoch/batch loop both trainers share; returns (final step, last logged values).
+
+    ``train_step(batch) -> (values, grad_norm, lr)`` does one optimiser step. Every ``log_every``
+    steps a JSONL entry is written; every ``val_every`` steps ``validate()`` runs on rank 0; every
+    ``ckpt_every`` steps and at exit (also on error or interrupt) ``save(step)`` is called, then the
+    run is finished. Resuming mid-epoch skips the samples already seen (:class:`EpochSampler`).
+    """
+    batches_per_epoch = max(sampler.per_rank() // batch, 1)
+    last: dict[str, float] = {}
+    t_last = time.perf_counter()
+    try:
+        while step < steps:
+            epoch, pos = divmod(step, batches_per_epoch)
+            sampler.set_epoch(epoch, skip=pos * batch)
+            train_set.set_epoch(epoch)
+            loader = DataLoader(train_set, batch_size=batch, sampler=sampler, num_workers=workers,
+                                drop_last=True, persistent_workers=False)
+            for item in loader:
+                last, grad_norm, lr = train_step(item)
+                step += 1
+                if step % log_every == 0 or step == steps:
+                    now = time.perf_counter()
+                    log_file.write({"step": step, **last, "grad_norm": float(grad_norm), "lr": lr,
+                                    "s_per_step": (now - t_last) / log_every, "epoch": epoch})
+                    t_last = now
+                    log.info("step %d loss %.4f lr %.2e", step, last["loss"], lr)
+                if validate is not None and ctx.rank == 0 and (step % val_every == 0 or step == steps):
+                    values = validate()
+                    log_file.write({"step": step, **values})
+                    last.update(values)
+                if step % ckpt_every == 0:
+                    save(step)
+                if step >= steps:
+                    break
+    finally:
+        save(step)
+        finish_run(log_file, ctx)
+    return step, last
