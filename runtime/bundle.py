@@ -147,6 +147,11 @@ class VotingConfig:
     #: (``target.surface_points``) placed at the fitted pose; 0 disables the check. It compares
     #: the pose with the data, not with the votes, so a confident but wrong fit is caught.
     min_surface_fitness: float = 0.0
+    #: least median left-right patch ZNCC of the target's visible surface at the fitted pose
+    #: (:mod:`spacepose.photometric`); it goes back to the images, so it catches poses fitted to
+    #: wrong stereo disparities. -1 disables the check; a view with too few textured patches to
+    #: score is not rejected by it.
+    min_photo_consistency: float = -1.0
 
 
 @dataclass(frozen=True)
@@ -421,7 +426,8 @@ def _parse_voting(section: Any) -> VotingConfig:
         elif isinstance(default, int):
             value = _integer(value, where)
         else:
-            value = _number(value, where, positive=name not in ("min_confidence", "min_surface_fitness"))
+            value = _number(value, where, positive=name not in ("min_confidence", "min_surface_fitness",
+                                                                     "min_photo_consistency"))
         values[name] = value
     if values["kernel"] not in ("flat", "gaussian"):
         raise BundleError(f"bundle.json: voting.kernel must be 'flat' or 'gaussian', got {values['kernel']!r}")
@@ -431,6 +437,9 @@ def _parse_voting(section: Any) -> VotingConfig:
         raise BundleError(f"bundle.json: voting.min_confidence must be in [0, 1), got {values['min_confidence']!r}")
     if not 0.0 <= values["min_surface_fitness"] <= 1.0:
         raise BundleError(f"bundle.json: voting.min_surface_fitness must be in [0, 1], got {values['min_surface_fitness']!r}")
+    if not -1.0 <= values["min_photo_consistency"] < 1.0:
+        raise BundleError("bundle.json: voting.min_photo_consistency must be in [-1, 1), got "
+                          f"{values['min_photo_consistency']!r}")
     for name in ("min_cluster_fraction", "min_keypoint_fraction", "seg_threshold"):
         if not 0.0 < values[name] < 1.0:
             raise BundleError(f"bundle.json: voting.{name} must be in (0, 1), got {values[name]!r}")

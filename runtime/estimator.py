@@ -5,7 +5,8 @@ The flow of one frame (DESIGN.md), each step a named stage timed in ``PoseResult
     validate -> rectify -> stereo (coarse pass or prior ROI, fine pass) -> pose_inputs (triangulate,
     back-project, sample, RGB crop, kNN indices: spacepose.pose_preprocess, shared with training)
     -> pose_net (ONNX) -> voting
-    (MeanShift + SVD fit, validity, confidence) [-> refine (ICP, off by default)]
+    (MeanShift + SVD fit, validity, confidence) -> verify (surface fitness against the stereo points,
+    left-right photometric consistency: spacepose.photometric) [-> refine (ICP, off by default)]
 
 Input rule (one rule, no exceptions): an argument that is not a numpy array is a programming error
 and raises :class:`~spacepose.errors.ShapeError`; every numpy array the estimator cannot use — wrong
@@ -36,6 +37,7 @@ from . import roi
 from .bundle import ModelBundle, load_bundle
 from .errors import ShapeError
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
+from .photometric import photometric_consistency
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 
@@ -386,6 +388,17 @@ class PoseEstimator:
                 logger.info("pose rejected: surface fitness %.2f < %.2f", fitness, voting.min_surface_fitness)
                 return "fit_residual", None, stereo.window, (
                     f"only {fitness:.0%} of the stereo points lie on the target surface at the fitted pose")
+        if stage.valid and voting.min_photo_consistency > -1.0 and len(bundle.surface_points):
+            with timer.stage("verify"):
+                photo = photometric_consistency(stage.R, stage.t, np.asarray(bundle.surface_points), left_r, right_r,
+                                                self.K, self.baseline_m)
+            if photo.score is not None and photo.score < voting.min_photo_consistency:
+                logger.info("pose rejected: photometric consistency %.2f < %.2f", photo.score,
+                            voting.min_photo_consistency)
+                return "fit_residual", None, stereo.window, (
+                    f"the left and right images disagree at the fitted pose (patch ZNCC {photo.score:.2f})")
+            if photo.score is None:
+                logger.info("photometric check skipped: %d textured patches", photo.patches)
         if stage.valid and self.refine and self._surface_normals is not None:
             with timer.stage("refine"):
                 R, t = refine_icp(stage.R, stage.t, xyz, np.asarray(bundle.surface_points),

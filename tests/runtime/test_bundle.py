@@ -89,6 +89,8 @@ class TestLoad:
          "input_size"),
         ({"voting": {"kernel": "box"}}, "kernel"),
         ({"voting": {"bandwidth": 1.0}}, "unknown keys"),
+        ({"voting": {"min_photo_consistency": 1.0}}, "min_photo_consistency"),
+        ({"voting": {"min_photo_consistency": -1.5}}, "min_photo_consistency"),
         ({"pose": {**manifest()["pose"], "n_pointz": 512}}, "unknown keys in pose"),
         ({"pose": {**manifest()["pose"], "crop_size": [100, 100]}}, "invalid pose input spec"),
         ({"rig": {"image_size": [640, 480], "focal_px": -1, "baseline_m": 1.0}}, "focal_px"),

@@ -123,6 +123,39 @@ def test_surface_fitness_check_compares_the_pose_with_the_data(tmp_path, surface
         assert res.status == "fit_residual" and "target surface" in res.detail and np.all(np.isnan(res.t))
 
 
+@pytest.mark.parametrize("score, valid", [(0.1, False), (0.9, True), (None, True)])
+def test_photometric_check_rejects_poses_the_images_contradict(tmp_path, monkeypatch, score, valid):
+    from _bundle_fixtures import manifest
+
+    import spacepose.estimator as est_mod
+    from spacepose.photometric import PhotoConsistency
+
+    seen = []
+
+    def fake(R, t, surface, left, right, K, baseline_m):
+        seen.append((left.shape, right.shape, baseline_m))
+        return PhotoConsistency(score, 0 if score is None else 500, 800)
+
+    monkeypatch.setattr(est_mod, "photometric_consistency", fake)
+    target = dict(manifest()["target"], surface_points=np.zeros((10, 3)).tolist())
+    folder = make_bundle(tmp_path / "b", manifest_overrides={
+        "target": target, "voting": {"min_points": 32, "min_photo_consistency": 0.3}})
+    est = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(folder), threads=1)
+    res = est.estimate(*synthetic_pair())
+    assert len(seen) == 1 and seen[0][0][:2] == (480, 640) and seen[0][2] == pytest.approx(est.baseline_m)
+    assert res.valid is valid and "verify" in res.timings_ms
+    if not valid:
+        assert res.status == "fit_residual" and "disagree" in res.detail and np.all(np.isnan(res.R))
+
+
+def test_photometric_check_off_by_default(bundle, monkeypatch):
+    import spacepose.estimator as est_mod
+
+    monkeypatch.setattr(est_mod, "photometric_consistency", lambda *a, **k: pytest.fail("check ran while disabled"))
+    assert bundle.voting.min_photo_consistency == -1.0
+    assert PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1).estimate(*synthetic_pair()).valid
+
+
 def test_no_prior_option(bundle, monkeypatch):
     est = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, use_prior=False)
     left, right = synthetic_pair()
