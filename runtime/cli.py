@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "train-pose": "spacepose.tools.cli_train_pose",
     "eval-pose": "spacepose.tools.cli_eval_pose",
     "export-pose": "spacepose.export.cli_export_pose",
+    "quantize": "spacepose.export.cli_quantize",
 }
 
 
