@@ -145,13 +145,22 @@ def farthest_point_sampling(xyz: np.ndarray, n_out: int, start: int = 0) -> np.n
     n = len(xyz)
     if not 1 <= n_out <= n:
         raise ValueError(f"n_out must be in [1, {n}], got {n_out}")
-    pts = xyz.astype(np.float64)
+    cols = [np.ascontiguousarray(xyz[:, j], dtype=np.float64) for j in range(xyz.shape[1])]
     idx = np.empty(n_out, dtype=np.int64)
     idx[0] = start
-    dist = np.sum((pts - pts[start]) ** 2, axis=1)
+    dist = np.full(n, np.inf)
+    d2, tmp = np.empty(n), np.empty(n)
     for i in range(1, n_out):
+        # squared distance to the last chosen point, summed per axis in place (no temporaries)
+        last = idx[i - 1]
+        np.subtract(cols[0], cols[0][last], out=d2)
+        np.multiply(d2, d2, out=d2)
+        for col in cols[1:]:
+            np.subtract(col, col[last], out=tmp)
+            np.multiply(tmp, tmp, out=tmp)
+            np.add(d2, tmp, out=d2)
+        np.minimum(dist, d2, out=dist)
         idx[i] = int(np.argmax(dist))
-        np.minimum(dist, np.sum((pts - pts[idx[i]]) ** 2, axis=1), out=dist)
     return idx
 
 

@@ -136,7 +136,8 @@ def to_rgb_uint8(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out)
 
 
-def _window_mask(shape: tuple[int, int], window_hint: object) -> np.ndarray:
+def _window_box(shape: tuple[int, int], window_hint: object) -> tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)`` of ``window_hint`` clipped to an image of ``shape`` (may be empty)."""
     if isinstance(window_hint, roi.Window):
         x0, y0, x1, y1 = window_hint.bbox
     else:
@@ -145,9 +146,21 @@ def _window_mask(shape: tuple[int, int], window_hint: object) -> np.ndarray:
         except (TypeError, ValueError) as err:
             raise ShapeError(f"window_hint must be a roi.Window or (x0, y0, x1, y1), got {window_hint!r}") from err
     h, w = shape
-    mask = np.zeros((h, w), dtype=bool)
-    mask[max(y0, 0):max(min(y1, h), 0), max(x0, 0):max(min(x1, w), 0)] = True
-    return mask
+    return max(x0, 0), max(y0, 0), max(min(x1, w), 0), max(min(y1, h), 0)
+
+
+def _support_box(disparity: np.ndarray, box: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+    """The smallest sub-box of ``box`` holding every positive disparity (empty box: none).
+
+    The flight stereo stage returns 0 outside its fine window, so depth and back-projection run on
+    this box only; the points, and their row-major order, are those of the whole frame.
+    """
+    x0, y0, x1, y1 = box
+    positive = disparity[y0:y1, x0:x1] > 0  # NaN compares False
+    rows, cols = np.flatnonzero(positive.any(axis=1)), np.flatnonzero(positive.any(axis=0))
+    if len(rows) == 0:
+        return x0, y0, x0, y0
+    return x0 + int(cols[0]), y0 + int(rows[0]), x0 + int(cols[-1]) + 1, y0 + int(rows[-1]) + 1
 
 
 def prepare_pose_inputs(
@@ -188,14 +201,20 @@ def prepare_pose_inputs(
     """
     rgb = to_rgb_uint8(left_rect)
     check_shape(disparity, rgb.shape[:2], "disparity", dtypes=(np.floating,))
-    depth = disparity_to_depth(disparity, float(np.asarray(K)[0, 0]), baseline_m)
+    h, w = disparity.shape
+    box = (0, 0, w, h) if window_hint is None else _window_box((h, w), window_hint)
+    x0, y0, x1, y1 = _support_box(disparity, box)
+    K_box = np.array(K, dtype=np.float64, copy=True)
+    K_box[0, 2] -= x0
+    K_box[1, 2] -= y0
+    depth = disparity_to_depth(disparity[y0:y1, x0:x1], float(K_box[0, 0]), baseline_m)
     mask = depth > 0
     if depth_range_m is not None:
         z_lo, z_hi = float(depth_range_m[0]), float(depth_range_m[1])
         mask &= (depth >= z_lo) & (depth <= z_hi)
-    if window_hint is not None:
-        mask &= _window_mask(depth.shape, window_hint)
-    cloud = backproject(depth, K, mask)
+    cloud = backproject(depth, K_box, mask)
+    cloud = type(cloud)(points=cloud.points, pixels=cloud.pixels + np.array([x0, y0], dtype=cloud.pixels.dtype),
+                        colors=cloud.colors)
     n_valid = len(cloud)
     if n_valid < max(int(min_points), 1):
         status = "no_target" if n_valid == 0 else "too_few_points"

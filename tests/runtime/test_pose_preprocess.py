@@ -97,6 +97,34 @@ class TestPreparePoseInputs:
         out2 = prepare_pose_inputs(image, disp, K, B, SPEC, window_hint=(0, 0, 70, 60))
         np.testing.assert_array_equal(out.pixels, out2.pixels)
 
+    def test_same_points_as_the_whole_frame(self):
+        # depth and back-projection only run on the box of positive disparities: the points, their
+        # order and hence the sample must be those of the whole frame (scattered, NaN, negative values)
+        from spacepose.geometry import backproject, disparity_to_depth
+        from spacepose.pose_preprocess import sample_indices
+
+        rng = np.random.default_rng(5)
+        image = rng.integers(0, 255, size=(H, W, 3), dtype=np.uint8)
+        disp = np.where(rng.random((H, W)) < 0.3, rng.uniform(5, 15, (H, W)), 0.0).astype(np.float32)
+        disp[:13] = 0.0
+        disp[:, 140:] = 0.0
+        disp[20, 30], disp[50, 60], disp[70, 20] = np.nan, -3.0, np.inf
+        for hint in (None, (25, 18, 120, 100)):
+            out = prepare_pose_inputs(image, disp, K, B, SPEC, window_hint=hint, seed=7)
+            depth = disparity_to_depth(disp, F, B)
+            mask = depth > 0
+            if hint is not None:
+                box = np.zeros_like(mask)
+                box[hint[1]:hint[3], hint[0]:hint[2]] = True
+                mask &= box
+            ref = backproject(depth, K, mask)
+            assert out.n_valid == len(ref)
+            idx = sample_indices(len(ref), SPEC.n_points, 7)
+            np.testing.assert_array_equal(out.pixels, ref.pixels[idx])
+            np.testing.assert_allclose(out.xyz_cam, ref.points[idx], rtol=1e-6, atol=1e-6)
+        empty = prepare_pose_inputs(image, np.zeros((H, W), np.float32), K, B, SPEC)
+        assert empty.status == "no_target"
+
     def test_rgb_transform_changes_colours(self):
         image, disp = scene()
         plain = prepare_pose_inputs(image, disp, K, B, SPEC)
