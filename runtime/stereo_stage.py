@@ -4,7 +4,9 @@ Per frame (the stereo pipeline design of the project contract):
 
 1. *coarse pass* — the whole rectified frame letterboxed into the graph's fixed input size; target
    pixels are those above ``coarse_threshold`` net pixels of disparity (Earth and stars sit at ~0);
-   their box and disparity range give the ROI. A caller that already knows where the target is
+   their box and disparity range give the ROI. Pixels that the images themselves place at infinity
+   (they match better unshifted than at the predicted disparity: :mod:`spacepose.infinity`) are
+   not target, however much disparity the graph gave them. A caller that already knows where the target is
    (e.g. from the previous pose) passes a :class:`RoiHint` and the coarse pass is skipped.
 2. *fine pass* — one square window, the same pixel window in left and right and zero padded beyond
    the image, that holds the target in the left image and its copy shifted by ``-d`` in the right
@@ -25,6 +27,7 @@ from typing import Any, Callable
 import numpy as np
 
 from . import roi
+from .infinity import infinity_regions
 from .errors import BundleError, ShapeError
 from .onnx_session import make_session, session_metadata
 
@@ -129,10 +132,11 @@ class StereoMatcher:
         margin: window side = margin * longest side of the target box ∪ its right-image copy.
         min_side: smallest window side in full-frame pixels.
         mem_arena: onnxruntime CPU memory arena (off: lower peak RSS).
+        infinity_check: drop coarse-pass pixels that match better at zero disparity (:mod:`spacepose.infinity`).
     """
 
     def __init__(self, onnx_path: str | os.PathLike, threads: int = 2, *, coarse_threshold: float = 2.0,
-                 margin: float = 1.25, min_side: int = 32, mem_arena: bool = False) -> None:
+                 margin: float = 1.25, min_side: int = 32, mem_arena: bool = False, infinity_check: bool = True) -> None:
         session = make_session(onnx_path, threads=threads, mem_arena=mem_arena)
         meta = session_metadata(session)
         shapes = {i.name: list(i.shape) for i in session.get_inputs()}
@@ -145,25 +149,25 @@ class StereoMatcher:
             (out,) = session.run(["disparity"], {"left": left, "right": right})
             return out[0, 0]
 
-        self._setup(infer, size, iters, max_disp, meta, coarse_threshold, margin, min_side)
+        self._setup(infer, size, iters, max_disp, meta, coarse_threshold, margin, min_side, infinity_check)
         self.session = session
         self.path = str(onnx_path)
 
     @classmethod
     def from_callable(cls, infer: InferFn, input_size: tuple[int, int], *, iters: int, max_disp: float = 192.0,
                       metadata: dict[str, Any] | None = None, coarse_threshold: float = 2.0, margin: float = 1.25,
-                      min_side: int = 32) -> "StereoMatcher":
+                      min_side: int = 32, infinity_check: bool = True) -> "StereoMatcher":
         """A matcher around any ``infer(left, right) -> (h, w)`` (e.g. a torch model for benchmarks)."""
         self = cls.__new__(cls)
         meta = dict(metadata or {"kind": "stereo", "input_size": list(input_size), "iters": iters, "max_disp": max_disp})
         self._setup(infer, (int(input_size[0]), int(input_size[1])), int(iters), float(max_disp), meta,
-                    coarse_threshold, margin, min_side)
+                    coarse_threshold, margin, min_side, infinity_check)
         self.session = None
         self.path = None
         return self
 
     def _setup(self, infer: InferFn, size: tuple[int, int], iters: int, max_disp: float, meta: dict[str, Any],
-               coarse_threshold: float, margin: float, min_side: int) -> None:
+               coarse_threshold: float, margin: float, min_side: int, infinity_check: bool = True) -> None:
         if margin < 1.0:
             raise ValueError(f"margin must be >= 1, got {margin}")
         self._infer = infer
@@ -173,6 +177,7 @@ class StereoMatcher:
         self.metadata = meta
         self.coarse_threshold = float(coarse_threshold)
         self.margin = float(margin)
+        self.infinity_check = bool(infinity_check)
         self.min_side = int(min_side)
 
     # ---------------------------------------------------------------- passes
@@ -191,6 +196,8 @@ class StereoMatcher:
         inside = np.zeros_like(disp, dtype=bool)
         inside[max(0, int(np.ceil(v0))):int(np.floor(v1)) + 1, max(0, int(np.ceil(u0))):int(np.floor(u1)) + 1] = True
         disp = np.where(inside, disp, 0.0).astype(np.float32)
+        if self.infinity_check:
+            disp[infinity_regions(lv, rv, disp, min_disparity=self.coarse_threshold)] = 0.0
         return disp, t
 
     def roi_from_coarse(self, coarse_disp: np.ndarray, t: roi.CropTransform, image_size: tuple[int, int]) -> RoiHint | None:

@@ -42,9 +42,29 @@ def test_to_net_input():
 
 class TestMatcherGeometry:
     def _frame(self):
+        # the letterbox scale of 160x120 into 64x64 is 0.4: the oracle's 10 net px are 25 frame px
         left = np.zeros((120, 160), np.uint8)
         left[40:80, 60:110] = 200
-        return left, left.copy()
+        right = np.zeros_like(left)
+        right[40:80, 35:85] = 200
+        return left, right
+
+    def test_coarse_pass_drops_what_matches_at_infinity(self):
+        # a textured patch seen identically by both cameras is at infinity (the Earth): a graph that
+        # gives it 10 px does not make it the target
+        rng = np.random.default_rng(0)
+        left = np.zeros((120, 160), np.uint8)
+        left[40:80, 60:110] = rng.integers(60, 250, (40, 50))
+        m = StereoMatcher.from_callable(_oracle(10.0), (64, 64), iters=2)
+        assert m.infinity_check
+        res = m.match(left, left.copy())
+        assert res.status == "no_target" and res.window is None
+        off = StereoMatcher.from_callable(_oracle(10.0), (64, 64), iters=2, infinity_check=False)
+        assert off.match(left, left.copy()).status == "fine"
+        # the same patch really shifted by 25 px is kept
+        right = np.zeros_like(left)
+        right[40:80, 35:85] = left[40:80, 60:110]
+        assert m.match(left, right).status == "fine"
 
     def test_coarse_then_fine_window_and_scale(self):
         left, right = self._frame()
