@@ -41,3 +41,26 @@ def test_train_checkpoint_resume(synthetic_dataset, tmp_path):
     ckpt = load_checkpoint(out / "last.pt")
     assert summary["step"] == 3 and ckpt["step"] == 3
     assert ckpt["scheduler"]["last_epoch"] == 3 and "rng" in ckpt
+
+
+@pytest.mark.slow
+def test_torchrun_two_processes(synthetic_dataset, tmp_path):
+    """The same code under ``torchrun --nproc_per_node 2`` (gloo on CPU): DDP, sharded sampler, one checkpoint."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "ddp"
+    driver = tmp_path / "driver.py"
+    driver.write_text(
+        "import json, sys\n"
+        "from spacepose.tools.train_stereo import TrainConfig, train_stereo\n"
+        f"cfg = TrainConfig(dataset={str(synthetic_dataset)!r}, out={str(out)!r}, steps=2, batch=1, iters=2,\n"
+        "                  size=(64, 64), ckpt_every=2, val_every=100, log_every=1, threads=1,\n"
+        f"                  stereo={TINY!r})\n"
+        "train_stereo(cfg)\n")
+    proc = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
+                           str(driver)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    doc = json.loads((out / "config.json").read_text())
+    assert doc["world_size"] == 2
+    assert load_checkpoint(out / "last.pt")["step"] == 2
