@@ -40,7 +40,8 @@ def run(args: argparse.Namespace) -> int:
     from .cli_estimate import Progress, check_outputs, list_frames, read_pair
     from .errors import DatasetError, ImageReadError
     from .estimator import PoseEstimator
-    from .profiler import budget_to_dict, check_budget, load_budget, peak_rss_bytes, summarize_timings
+    from .profiler import (budget_to_dict, check_budget, load_budget, network_split, peak_rss_bytes,
+                           summarize_timings)
 
     try:
         budget = load_budget(args.budget)
@@ -55,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     threads = args.threads or budget.cores
     rss_before = peak_rss_bytes()
     estimator = PoseEstimator(args.calib, bundle=args.bundle, threads=threads)
-    samples, statuses = [], {}
+    samples, statuses, network = [], {}, []
     progress = Progress(len(names))
     try:
         for i, name in enumerate(names):
@@ -70,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
                 continue
             result = estimator.estimate(left, right)
             samples.append(result.timings_ms)
+            network.append(result.network_ms)
             statuses[result.status] = statuses.get(result.status, 0) + 1
             progress.update(i + 1, result.status)
     finally:
@@ -82,11 +84,14 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(summary))
     print(f"peak RSS {peak / 2**20:.0f} MiB (before loading: {rss_before / 2**20:.0f} MiB); "
           f"budget: {budget.frame_ms:.0f} ms/frame, {budget.peak_rss_mb:.0f} MiB, {budget.cores} cores")
+    split = network_split([sum(t.values()) for t in samples], network)
+    print(f"inside the graphs: {split['network_ms_sum'] / len(samples):.0f} ms/frame; outside them (the pipeline's own "
+          f"work): {100 * split['non_network_share']:.1f} % of the time")
     print("statuses: " + ", ".join(f"{k}={v}" for k, v in sorted(statuses.items())))
     for problem in problems:
         print(f"OVER BUDGET: {problem}")
     if args.json is not None:
-        report = {"frames": len(samples), "threads": threads, "stages_ms": summary,
+        report = {"frames": len(samples), "threads": threads, "stages_ms": summary, "network_split": split,
                   "peak_rss_mb": peak / 2**20, "budget": budget_to_dict(budget), "over_budget": problems,
                   "statuses": statuses, "bundle": str(estimator.bundle.path)}
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -27,6 +27,7 @@ import logging
 import math
 import os
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -65,6 +66,8 @@ class PoseResult:
             ``fit_residual``, ``out_of_range``, ``bad_input``).
         confidence: in [0, 1] (see :mod:`spacepose.pose_stage`); 0 when not valid.
         timings_ms: wall time per named stage.
+        network_ms: of that, the time inside the stereo and pose graphs (the rest is the pipeline's
+            own work: validation, rectification, windows, back-projection, voting, checks).
         n_points: target points the pose was voted from (centre-cluster inliers; 0 if none).
         roi: left-image box ``(x0, y0, x1, y1)`` of the stereo fine pass, or ``None``.
         detail: a human-readable reason for an invalid result ("" when valid).
@@ -77,6 +80,7 @@ class PoseResult:
     status: str
     confidence: float
     timings_ms: dict[str, float] = field(default_factory=dict)
+    network_ms: float = 0.0
     n_points: int = 0
     roi: tuple[int, int, int, int] | None = None
     detail: str = ""
@@ -317,6 +321,7 @@ class PoseEstimator:
             R, t, conf, valid = np.full((3, 3), np.nan), np.full(3, np.nan), 0.0, False
         result = PoseResult(R=R, t=t, q_wxyz=rotation_to_quaternion(R), valid=valid, status=status,
                             confidence=float(conf), timings_ms=dict(timer.timings_ms),
+                            network_ms=timer.network_ms,
                             n_points=0 if stage is None else int(stage.n_inliers),
                             roi=None if window is None else window.bbox, detail=detail)
         if status != "bad_input":  # a bad frame says nothing about where the target is
@@ -357,6 +362,7 @@ class PoseEstimator:
         """
         with timer.stage("stereo"):
             stereo = self.stereo.match(left_r, right_r, roi_hint=hint)
+        timer.add_network(stereo.timings_ms.get("net_ms", 0.0))
         if stereo.window is None:
             return "no_target", None, None, "the coarse stereo pass found no target"
 
@@ -372,7 +378,9 @@ class PoseEstimator:
         xyz = prep.xyz_cam
         inputs = {name: prep.feeds[name] for name in self._pose_inputs}
         with timer.stage("pose_net"):
+            t_net = time.perf_counter()
             outputs = dict(zip(self._pose_outputs, self.pose_session.run(self._pose_outputs, inputs)))
+            timer.add_network((time.perf_counter() - t_net) * 1e3)
         with timer.stage("voting"):
             stage = solve_pose(
                 xyz, outputs["seg_logits"].astype(np.float32),

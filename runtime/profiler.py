@@ -32,6 +32,7 @@ __all__ = [
     "peak_rss_bytes",
     "current_rss_bytes",
     "summarize_timings",
+    "network_split",
     "check_budget",
     "budget_to_dict",
 ]
@@ -48,6 +49,8 @@ class StageTimer:
 
     def __init__(self) -> None:
         self.timings_ms: dict[str, float] = {}
+        #: time spent inside neural-network graphs, a part of the stages (see :meth:`add_network`)
+        self.network_ms = 0.0
 
     @contextmanager
     def stage(self, name: str) -> Iterator[None]:
@@ -62,6 +65,10 @@ class StageTimer:
     def add(self, name: str, milliseconds: float) -> None:
         """Add an externally measured duration (e.g. a sub-stage timed inside another module)."""
         self.timings_ms[name] = self.timings_ms.get(name, 0.0) + float(milliseconds)
+
+    def add_network(self, milliseconds: float) -> None:
+        """Record that ``milliseconds`` of the stages already timed were spent inside a graph."""
+        self.network_ms += float(milliseconds)
 
     @property
     def total_ms(self) -> float:
@@ -177,6 +184,23 @@ def load_budget(path: str | os.PathLike | None = None) -> Budget:
     if "cores" in data and isinstance(data["cores"], float) and float(data["cores"]).is_integer():
         data["cores"] = int(data["cores"])
     return Budget(**data)
+
+
+def network_split(totals_ms: Sequence[float], network_ms: Sequence[float]) -> dict[str, float]:
+    """Network vs pipeline time over frames: sums, and the non-network share of the total time.
+
+    ``totals_ms[i]`` is frame i's total (sum of its stages), ``network_ms[i]`` the part of it spent
+    inside graphs. ``non_network_share`` is sum(total - network) / sum(total) (time-weighted), and
+    ``non_network_share_p50`` the median of the per-frame shares.
+    """
+    total = np.asarray(totals_ms, dtype=np.float64)
+    net = np.asarray(network_ms, dtype=np.float64)
+    if total.shape != net.shape or total.size == 0:
+        raise ValueError("need one network time per frame total, and at least one frame")
+    share = np.where(total > 0, (total - net) / np.where(total > 0, total, 1.0), 0.0)
+    return {"total_ms_sum": float(total.sum()), "network_ms_sum": float(net.sum()),
+            "non_network_share": float((total.sum() - net.sum()) / total.sum()) if total.sum() > 0 else 0.0,
+            "non_network_share_p50": float(np.median(share)), "frames": int(total.size)}
 
 
 def summarize_timings(samples: Sequence[Mapping[str, float]]) -> dict[str, dict[str, float]]:

@@ -45,6 +45,8 @@ def test_within_generous_budget(setup, tmp_path, capsys):
     assert {"stereo", "voting", "total"} <= set(report["stages_ms"])
     assert set(report["stages_ms"]["total"]) >= {"p50", "p95", "max"}
     assert report["peak_rss_mb"] > 0 and report["over_budget"] == []
+    split = report["network_split"]
+    assert 0.0 < split["network_ms_sum"] < split["total_ms_sum"] and 0.0 < split["non_network_share"] < 1.0
     text = capsys.readouterr().out
     assert "p95" in text and "peak RSS" in text
 

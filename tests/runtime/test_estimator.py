@@ -40,6 +40,8 @@ def test_end_to_end_valid_pose(estimator):
     np.testing.assert_allclose(res.q_wxyz, [1, 0, 0, 0], atol=1e-5)
     assert 0.0 < res.confidence <= 1.0
     assert list(res.timings_ms) == STAGES
+    # the graphs' own time is part of the stereo and pose_net stages, never more than them
+    assert 0.0 < res.network_ms <= res.timings_ms["stereo"] + res.timings_ms["pose_net"]
     assert res.n_points > 32 and res.roi is not None
     record = res.to_dict("000001.png")
     assert record["frame"] == "000001.png" and record["valid"] is True

@@ -69,3 +69,25 @@ def test_summarize_and_check_budget():
     assert check_budget(summary, 10 * 2**20, Budget(rate_hz=1.0, peak_rss_mb=100)) == []
     problems = check_budget(summary, 200 * 2**20, Budget(rate_hz=10.0, peak_rss_mb=100))
     assert len(problems) == 2 and "p95" in problems[0] and "RSS" in problems[1]
+
+
+def test_network_split():
+    from spacepose.profiler import network_split
+
+    out = network_split([100.0, 200.0, 0.0], [90.0, 150.0, 0.0])
+    assert out["network_ms_sum"] == 240.0 and out["total_ms_sum"] == 300.0
+    assert out["non_network_share"] == pytest.approx(60.0 / 300.0)
+    assert out["non_network_share_p50"] == pytest.approx(0.1)  # median of 0.1, 0.25, 0.0
+    with pytest.raises(ValueError):
+        network_split([1.0], [])
+    with pytest.raises(ValueError):
+        network_split([], [])
+
+
+def test_stage_timer_network_accumulates():
+    from spacepose.profiler import StageTimer
+
+    timer = StageTimer()
+    timer.add_network(2.5)
+    timer.add_network(1.5)
+    assert timer.network_ms == 4.0 and timer.timings_ms == {}
