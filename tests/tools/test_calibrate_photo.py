@@ -13,14 +13,16 @@ def test_perturbations_start_with_the_true_pose_and_move_it():
     np.testing.assert_allclose(poses["depth+10%"][1], t * 1.1)
     np.testing.assert_allclose(poses["depth-20%"][1], t * 0.8)
     np.testing.assert_allclose(poses["shift 0.5D"][1], t + [2.5, 0, 0])
-    R_flip = poses["flip180"][0]
-    np.testing.assert_allclose(R_flip @ R_flip.T, np.eye(3), atol=1e-12)
-    assert np.trace(R_flip) == pytest.approx(-1.0)  # a 180° rotation
+    for axis in "xyz":
+        R_flip = poses[f"flip180 {axis}"][0]
+        np.testing.assert_allclose(R_flip @ R_flip.T, np.eye(3), atol=1e-12)
+        assert np.trace(R_flip) == pytest.approx(-1.0) and np.linalg.det(R_flip) == pytest.approx(1.0)
 
 
 def test_summarise_threshold_and_rejections():
     rows = [{"frame": str(i), "regime": "sun" if i % 2 else "mixed", "distance": 20.0, "patches": 100,
-             "true": 0.5 + 0.01 * i, "depth+10%": 0.1 * (i % 7), "flip180": None} for i in range(50)]
+             "true": 0.5 + 0.01 * i, "depth+10%": 0.1 * (i % 7), "flip180": None,
+             "fitness": {"true": 0.9, "depth+10%": 0.5, "flip180": 0.88}} for i in range(50)]
     out = summarise(rows, quantile=0.1)
     true = np.array([r["true"] for r in rows])
     assert out["threshold"] == pytest.approx(np.quantile(true, 0.1))
@@ -29,6 +31,7 @@ def test_summarise_threshold_and_rejections():
     depth = np.array([r["depth+10%"] for r in rows])
     assert table["depth+10%"]["rejected"] == pytest.approx(np.mean(depth < out["threshold"]))
     assert table["flip180"]["unverifiable"] == 50 and np.isnan(table["flip180"]["rejected"])
+    assert table["flip180"]["fitness_within_005_of_true"] == 1.0 and table["depth+10%"]["fitness_within_005_of_true"] == 0.0
     assert set(out["per_regime_true"]) == {"sun", "mixed"}
 
 
