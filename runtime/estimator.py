@@ -37,8 +37,8 @@ import numpy as np
 from . import roi
 from .bundle import ModelBundle, load_bundle
 from .errors import ShapeError
-from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .photometric import photometric_consistency
+from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 

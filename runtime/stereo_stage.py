@@ -27,8 +27,8 @@ from typing import Any, Callable
 import numpy as np
 
 from . import roi
-from .infinity import infinity_regions
 from .errors import BundleError, ShapeError
+from .infinity import infinity_regions
 from .onnx_session import make_session, session_metadata
 
 log = logging.getLogger(__name__)
