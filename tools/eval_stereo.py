@@ -160,6 +160,18 @@ def tune_sgbm(root: str | Path, base: SGBMParams, n_frames: int = 8,
     return SGBMParams(**best["params"]), trials
 
 
+def _frame_row(rec: FrameRecord, ours: np.ndarray, sgbm: np.ndarray, gt: np.ndarray, valid: np.ndarray) -> dict[str, Any]:
+    """Per-frame diagnosis: mean and median error on target pixels, and the share left at 0 (no estimate)."""
+    row: dict[str, Any] = {"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m,
+                           "gt_median": float(np.median(gt[valid])) if valid.any() else float("nan")}
+    for name, pred in (("ours", ours), ("sgbm", sgbm)):
+        err = np.abs(np.nan_to_num(pred[valid], nan=0.0) - gt[valid])
+        row[name] = {"epe": float(err.mean()) if err.size else float("nan"),
+                     "median": float(np.median(err)) if err.size else float("nan"),
+                     "zero_share": float(np.mean(pred[valid] <= 0)) if err.size else float("nan")}
+    return row
+
+
 def evaluate_stereo(dataset: str | Path, graph: str | Path, *, limit: int | None = None, threads: int = 2,
                     sgbm: SGBMParams | None = None, figure: str | Path | None = None,
                     n_figure: int = 4) -> dict[str, Any]:
@@ -179,6 +191,7 @@ def evaluate_stereo(dataset: str | Path, graph: str | Path, *, limit: int | None
     acc: dict[str, dict[str, MetricAccumulator]] = {"ours": {}, "sgbm": {}}
     times = {"ours": [], "sgbm": []}
     fig_rows: list[dict] = []
+    frame_rows: list[dict[str, Any]] = []
     seen_regimes: set[str] = set()
     for rec in recs:
         left, right, gt, valid = _load_test_frame(root, rec)
@@ -193,6 +206,7 @@ def evaluate_stereo(dataset: str | Path, graph: str | Path, *, limit: int | None
         for name, pred in (("ours", ours), ("sgbm", classic)):
             for g in _groups(rec):
                 acc[name].setdefault(g, MetricAccumulator()).add(pred, gt, valid)
+        frame_rows.append(_frame_row(rec, ours, classic, gt, valid))
         if figure is not None and len(fig_rows) < n_figure and rec.regime not in seen_regimes and valid.any():
             seen_regimes.add(rec.regime)
             fig_rows.append({"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "left": left_r,
@@ -204,6 +218,7 @@ def evaluate_stereo(dataset: str | Path, graph: str | Path, *, limit: int | None
         "sgbm_params": {**asdict(params), "P1": params.p1, "P2": params.p2},
         "latency_ms_median": {k: float(np.median(v)) if v else float("nan") for k, v in times.items()},
     }
+    report["per_frame"] = frame_rows
     for name in ("ours", "sgbm"):
         report[name] = {g: a.result() for g, a in sorted(acc[name].items(), key=lambda kv: _group_order(kv[0]))}
     if figure is not None and fig_rows:

@@ -47,3 +47,8 @@ def test_eval_cli(synthetic_dataset, tiny_bundle, tmp_path, capsys):
     assert (out / "stereo_fig13.png").stat().st_size > 1000
     assert "| overall | sgbm |" in format_table(report)
     assert report["sgbm_params"]["mode"] == "SGBM_3WAY"
+    # per-frame rows: their pixel-weighted mean is the overall EPE (weights: target pixels per frame)
+    rows = report["per_frame"]
+    assert len(rows) == 4 and all(set(r["ours"]) == {"epe", "median", "zero_share"} for r in rows)
+    assert all(0.0 <= r["sgbm"]["zero_share"] <= 1.0 and r["ours"]["median"] <= r["ours"]["epe"] * 10 + 1e-6 for r in rows)
+    assert min(r["ours"]["epe"] for r in rows) <= report["ours"]["overall"]["epe"] <= max(r["ours"]["epe"] for r in rows)
