@@ -63,17 +63,11 @@ def graph_latency_ms(onnx_path: str | Path, threads: int, calls: int = 10) -> fl
     """Median milliseconds of one call of a stereo graph on a textured pair (after one warm-up call)."""
     from spacepose.export.onnx_stereo import parity_inputs
     from spacepose.onnx_session import make_session, session_metadata
+    from spacepose.tools.bench_graphs import time_calls
 
     session = make_session(onnx_path, threads=threads)
     left, right = parity_inputs(tuple(session_metadata(session)["input_size"]), disparity=12.0)
-    feeds = {"left": left, "right": right}
-    session.run(["disparity"], feeds)
-    times = []
-    for _ in range(calls):
-        t0 = time.perf_counter()
-        session.run(["disparity"], feeds)
-        times.append((time.perf_counter() - t0) * 1e3)
-    return float(sorted(times)[len(times) // 2])
+    return time_calls(lambda f: session.run(["disparity"], f), [{"left": left, "right": right}], calls)["median_ms"]
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:
