@@ -305,10 +305,13 @@ class PoseEstimator:
             if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right))):
                 return "bad_input", "images hold NaN or inf"
         full = _full_scale(left)
+        # compare in the image's own dtype (a Python float would promote a uint8 frame to float64)
+        full_value = left.dtype.type(full)
         for name, image in (("left", left), ("right", right)):
-            if float(image.max()) <= DARK_FRACTION * full:
+            peak = image.max()
+            if float(peak) <= DARK_FRACTION * full:
                 return "no_target", f"{name} image is dark (eclipse?)"
-            if np.count_nonzero(image >= full) > SATURATED_FRACTION * image.size:
+            if peak >= full_value and np.count_nonzero(image >= full_value) > SATURATED_FRACTION * image.size:
                 return "bad_input", f"{name} image is saturated"
         return None
 

@@ -50,6 +50,10 @@ def make_session(path: str | os.PathLike, *, threads: int = 2, mem_arena: bool =
         ort.GraphOptimizationLevel.ORT_ENABLE_ALL if optimize else ort.GraphOptimizationLevel.ORT_ENABLE_BASIC
     )
     opts.log_severity_level = 3
+    # worker threads sleep between runs instead of spinning: the pipeline's numpy/OpenCV work runs
+    # between graph calls on the same cores, and spinning workers starve it (measured: kNN and
+    # voting took twice as long with spinning on)
+    opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
     try:
         return ort.InferenceSession(str(p), sess_options=opts, providers=["CPUExecutionProvider"])
     except Exception as err:  # onnxruntime raises its own Fail/InvalidGraph/... types

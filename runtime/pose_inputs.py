@@ -102,12 +102,57 @@ def pose_input_names(n_levels: int) -> list[str]:
     return names
 
 
-def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 512) -> np.ndarray:
+#: extra float32 candidates per row that are re-ranked in float64 (see :func:`knn_indices`)
+_KNN_MARGIN = 4
+#: float32 squared distances of a query point q closer than this times (2 |q| + distance)**2 (centred
+#: coordinates) may be misordered, and such rows are searched again in float64. The float32 error of
+#: ``|q|^2 + |r|^2 - 2 q.r`` with |r| <= |q| + distance is below about 4 eps (2 |q| + distance)**2.
+_KNN_TOL = 8 * float(np.finfo(np.float32).eps)
+
+
+def _squared_distances32(query: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """(M, N) float32 squared distances ``|q|^2 + |r|^2 - 2 q.r`` (one matrix product; inputs centred)."""
+    d2 = query @ (-2.0 * ref.T)
+    d2 += np.einsum("ij,ij->i", query, query)[:, None]
+    d2 += np.einsum("ij,ij->i", ref, ref)[None, :]
+    return d2
+
+
+def _tolerance(q_norm: np.ndarray, d2: np.ndarray) -> np.ndarray:
+    """Per-row float32 error bound of squared distances up to ``d2`` from points of norm ``q_norm``."""
+    return (_KNN_TOL * (2.0 * q_norm + np.sqrt(np.maximum(d2, 0.0))) ** 2).astype(np.float32)
+
+
+def _rank_exact(q: np.ndarray, r: np.ndarray, cand: np.ndarray, kk: int) -> np.ndarray:
+    """The ``kk`` of candidate indices ``cand`` (M, C) nearest to ``q`` (M, D) in float64, ties by index."""
+    diff = r[cand] - q[:, None, :]
+    exact = np.einsum("mcd,mcd->mc", diff, diff)
+    order = np.lexsort((cand, exact), axis=1)[:, :kk]  # by distance, then index
+    return np.take_along_axis(cand, order, axis=1)
+
+
+def _search64(q: np.ndarray, r: np.ndarray, kk: int) -> np.ndarray:
+    """(M, kk) nearest ``r`` rows of each ``q`` row from float64 distances to all of ``r``."""
+    diff = r[None, :, :] - q[:, None, :]
+    d2 = np.einsum("mnd,mnd->mn", diff, diff)
+    if kk == 1:
+        return np.argmin(d2, axis=1)[:, None]  # first minimum: the lowest index
+    part = np.argpartition(d2, kk - 1, axis=1)[:, :kk] if kk < len(r) else np.broadcast_to(
+        np.arange(len(r)), d2.shape)
+    order = np.lexsort((part, np.take_along_axis(d2, part, axis=1)), axis=1)
+    return np.take_along_axis(part, order, axis=1)
+
+
+def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 1024) -> np.ndarray:
     """Indices (M, k) int64 of the k nearest ``ref`` points of each ``query`` point, nearest first.
 
-    Brute force in float64, ``chunk`` query rows at a time (memory ``chunk * len(ref)``). Ties are
-    broken by the lower index, so the result is deterministic. If ``ref`` has fewer than ``k``
-    points, the farthest found neighbour is repeated to fill the row.
+    Brute force, ``chunk`` query rows at a time (memory ``chunk * len(ref)`` floats), giving the answer
+    of a float64 search with ties broken by the lower index. Candidates come from float32 distances
+    of coordinates centred on ``ref``'s mean (``k + 4`` per row) and are ranked in float64; a row whose
+    float32 distances cannot tell its k-th neighbour from the first excluded point is searched again
+    in float64 over all of ``ref``. Exactly tied points at the k-th place (duplicates) are
+    interchangeable: which one is kept is deterministic but not necessarily the lowest index. If
+    ``ref`` has fewer than ``k`` points, the farthest found neighbour is repeated to fill the row.
     """
     check_shape(query, (None, None), "query", dtypes=_FLOAT)
     check_shape(ref, (None, query.shape[1]), "ref", dtypes=_FLOAT)
@@ -115,25 +160,37 @@ def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 512) ->
         raise ShapeError("ref must hold at least one point")
     if k < 1:
         raise ValueError(f"k must be >= 1, got {k}")
-    q = query.astype(np.float64)
-    r = np.ascontiguousarray(ref, dtype=np.float64)
-    r2 = np.einsum("ij,ij->i", r, r)
+    centre = np.asarray(ref, dtype=np.float64).mean(axis=0)
+    q = np.asarray(query, dtype=np.float64) - centre
+    r = np.asarray(ref, dtype=np.float64) - centre
+    q32, r32 = q.astype(np.float32), r.astype(np.float32)
+    q_norm = np.sqrt(np.einsum("ij,ij->i", q, q))
     kk = min(k, len(r))
+    n_cand = min(kk + _KNN_MARGIN, len(r))
     out = np.empty((len(q), kk), dtype=np.int64)
     for start in range(0, len(q), chunk):
-        qc = q[start:start + chunk]
-        d2 = np.einsum("ij,ij->i", qc, qc)[:, None] + r2[None, :] - 2.0 * qc @ r.T
-        np.maximum(d2, 0.0, out=d2)
-        if kk == 1:  # argmin: fast, and ties go to the first (lowest) index
-            out[start:start + chunk, 0] = np.argmin(d2, axis=1)
+        stop = min(start + chunk, len(q))
+        qc = q[start:stop]
+        if n_cand == len(r):  # few points: rank them all
+            out[start:stop] = _rank_exact(qc, r, np.broadcast_to(np.arange(len(r)), (stop - start, len(r))), kk)
             continue
-        if kk < len(r):
-            part = np.argpartition(d2, kk - 1, axis=1)[:, :kk]
+        d2 = _squared_distances32(q32[start:stop], r32)
+        rows = np.arange(len(d2))
+        if kk == 1:  # argmin: first minimum = lowest index; re-check rows with a near tie
+            found = np.argmin(d2, axis=1)[:, None]
+            best = d2[rows, found[:, 0]]
+            tol = _tolerance(q_norm[start:stop], best)
+            redo = np.flatnonzero(np.count_nonzero(d2 <= (best + tol)[:, None], axis=1) > 1)
         else:
-            part = np.broadcast_to(np.arange(len(r)), (len(qc), len(r)))
-        pd = np.take_along_axis(d2, part, axis=1)
-        order = np.lexsort((part, pd), axis=1)  # by distance, then index
-        out[start:start + chunk] = np.take_along_axis(part, order, axis=1)
+            part = np.argpartition(d2, n_cand, axis=1)  # [:n_cand] candidates, [n_cand] the nearest other
+            cand = part[:, :n_cand]
+            kth = np.partition(np.take_along_axis(d2, cand, axis=1), kk - 1, axis=1)[:, kk - 1]
+            other = d2[rows, part[:, n_cand]]
+            found = _rank_exact(qc, r, cand, kk)
+            redo = np.flatnonzero(other - kth <= _tolerance(q_norm[start:stop], other))
+        if redo.size:
+            found[redo] = _search64(qc[redo], r, kk)
+        out[start:stop] = found
     if kk < k:
         out = np.concatenate([out, np.repeat(out[:, -1:], k - kk, axis=1)], axis=1)
     return out
@@ -208,7 +265,7 @@ def choose_from_pixels(pixels: np.ndarray, crop_size: tuple[int, int]) -> np.nda
     return v * w + u
 
 
-def pix2pt_indices(pixels: np.ndarray, crop_size: tuple[int, int], stride: int, chunk: int = 512) -> np.ndarray:
+def pix2pt_indices(pixels: np.ndarray, crop_size: tuple[int, int], stride: int, chunk: int = 1024) -> np.ndarray:
     """(Hf*Wf,) int64: for each pixel of the stride-``stride`` feature map, the nearest point in the image.
 
     ``pixels`` (N, 2) are the crop coordinates (u, v) of the points of one level; feature-map pixel
@@ -222,7 +279,17 @@ def pix2pt_indices(pixels: np.ndarray, crop_size: tuple[int, int], stride: int, 
     wf, hf = w // stride, h // stride
     jj, ii = np.meshgrid(np.arange(wf), np.arange(hf))
     centres = np.stack([(jj.ravel() + 0.5) * stride - 0.5, (ii.ravel() + 0.5) * stride - 0.5], axis=1)
-    return knn_indices(centres, pixels.astype(np.float64), 1, chunk=chunk)[:, 0]
+    if max(w, h) > 512 or np.any(np.abs(pixels) > 512) or np.any(pixels != np.round(pixels)):
+        return knn_indices(centres, pixels.astype(np.float64), 1, chunk=chunk)[:, 0]
+    # integer pixels and centres on a quarter-pixel grid, all within 512 px: the float32 squared
+    # distances (< 2**21, multiples of 1/16) are exact, and argmin's first minimum is the lowest
+    # index, so this is the float64 search's answer
+    out = np.empty(len(centres), dtype=np.int64)
+    ref = pixels.astype(np.float32)
+    for start in range(0, len(centres), chunk):
+        out[start:start + chunk] = np.argmin(_squared_distances32(centres[start:start + chunk].astype(np.float32), ref),
+                                             axis=1)
+    return out
 
 
 def estimate_normals(xyz: np.ndarray, nbr: np.ndarray) -> np.ndarray:

@@ -279,14 +279,20 @@ def warp_to_full(net_map: np.ndarray, transform: CropTransform, image_size: tupl
         raise ShapeError(f"net_map must have shape ({h}, {w}), got {check.shape}")
     flags = (cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR) | cv2.WARP_INVERSE_MAP
     src = check.astype(np.float32, copy=False)
-    out = cv2.warpAffine(src, transform.matrix, (iw, ih), flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    # pixels whose centre maps outside the net view get exactly 0 (no half-blended border values)
+    # pixels whose centre maps outside the net view get exactly 0 (no half-blended border values),
+    # so only the full-frame box of the pixels inside it is resampled
     u = np.arange(iw) * transform.sx + transform.tx
     v = np.arange(ih) * transform.sy + transform.ty
-    inside_u = (u >= -0.5) & (u <= w - 0.5)
-    inside_v = (v >= -0.5) & (v <= h - 0.5)
-    out[~inside_v, :] = 0.0
-    out[:, ~inside_u] = 0.0
+    cols = np.flatnonzero((u >= -0.5) & (u <= w - 0.5))
+    rows = np.flatnonzero((v >= -0.5) & (v <= h - 0.5))
+    out = np.zeros((ih, iw), dtype=np.float32)
+    if len(cols) == 0 or len(rows) == 0:
+        return out
+    x0, x1, y0, y1 = int(cols[0]), int(cols[-1]) + 1, int(rows[0]), int(rows[-1]) + 1
+    M = np.array(transform.matrix, dtype=np.float64, copy=True)
+    M[:, 2] += M[:, :2] @ np.array([x0, y0], dtype=np.float64)  # box pixel (x, y) is frame (x0 + x, y0 + y)
+    out[y0:y1, x0:x1] = cv2.warpAffine(src, M, (x1 - x0, y1 - y0), flags=flags, borderMode=cv2.BORDER_CONSTANT,
+                                       borderValue=0)
     return out
 
 

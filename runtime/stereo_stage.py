@@ -255,8 +255,9 @@ class StereoMatcher:
         fine = self._run(lv, rv, timings)
         timings["fine_ms"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
-        disp = roi.warp_to_full(fine, ft, (w, h)) / ft.scale
-        disp = np.maximum(disp, 0.0).astype(np.float32)
+        disp = roi.warp_to_full(fine, ft, (w, h))  # float32, a new array: scaled in place
+        np.divide(disp, np.float32(ft.scale), out=disp)
+        np.maximum(disp, np.float32(0.0), out=disp)
         timings["uncrop_ms"] = (time.perf_counter() - t0) * 1e3
         timings["total_ms"] = (time.perf_counter() - t_start) * 1e3
         return StereoResult(disp, window, ft.scale, coarse_bbox, "fine", timings)

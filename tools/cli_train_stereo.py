@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from spacepose.cli_args import parse_size
 from spacepose.tools.cli_training_args import add_loop_arguments, add_run_arguments
@@ -24,7 +25,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=parse_size, default=(256, 256), help="sample size WxH (the graph input)")
     parser.add_argument("--train-crop", type=parse_size, default=None,
                         help="random sub-crop WxH of each sample (cheaper steps; default: whole sample)")
+    parser.add_argument("--oversample", type=parse_oversample, nargs="+", default=[], metavar="REGIME=K",
+                        help="list every training frame of REGIME K times per epoch (e.g. mixed=3 penumbra=2)")
+    parser.add_argument("--init", type=Path, default=None,
+                        help="fine-tune: start from this checkpoint's weights with a fresh optimiser and schedule")
     add_loop_arguments(parser, workers=0)
+
+
+def parse_oversample(text: str) -> tuple[str, int]:
+    """``"mixed=3"`` -> ``("mixed", 3)``."""
+    regime, sep, k = text.partition("=")
+    try:
+        factor = int(k)
+    except ValueError:
+        factor = 0
+    if not sep or not regime or factor < 1:
+        raise argparse.ArgumentTypeError(f"expected REGIME=K with K >= 1, got {text!r}")
+    return regime, factor
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,7 +55,10 @@ def run(args: argparse.Namespace) -> int:
                       train_crop=tuple(args.train_crop) if args.train_crop else None,
                       ckpt_every=args.ckpt_every, val_every=args.val_every, val_samples=args.val_samples,
                       log_every=args.log_every, workers=args.workers, threads=args.threads, seed=args.seed,
-                      limit=args.limit)
+                      limit=args.limit, oversample=dict(args.oversample),
+                      init=str(args.init) if args.init else None)
+    if args.init and args.resume:
+        raise SystemExit("--init starts a new run; --resume continues one: give one of them")
     summary = train_stereo(cfg, resume=args.resume)
     print(json.dumps(summary, indent=2))
     return 0

@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -29,7 +29,8 @@ from spacepose.tools.labels import FrameLabel, read_labels
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FrameRecord", "read_labels", "StereoCropConfig", "StereoCropDataset", "photometric_augment"]
+__all__ = ["FrameRecord", "read_labels", "StereoCropConfig", "StereoCropDataset", "photometric_augment",
+           "oversample_records"]
 
 
 #: the stereo samples' name of the shared label record (only ``frame``, ``split``, ``regime`` and
@@ -102,6 +103,22 @@ def _random_subcrop(arrays: tuple[np.ndarray, ...], target: np.ndarray, crop: tu
     return tuple(a[y0:y0 + ch, x0:x0 + cw] for a in arrays)
 
 
+def oversample_records(records: list[FrameRecord], factors: Mapping[str, int]) -> list[FrameRecord]:
+    """``records`` with every frame of regime ``r`` listed ``factors[r]`` times (others once).
+
+    Repeated frames get different random views (the view RNG is keyed on the index), so this
+    weights the hard regimes without changing the crops' distribution within a regime.
+    """
+    for regime, k in factors.items():
+        if int(k) < 1:
+            raise ValueError(f"oversample factor for {regime!r} must be >= 1, got {k}")
+    known = {r.regime for r in records}
+    missing = sorted(set(factors) - known)
+    if missing:
+        raise DatasetError(f"oversample: no frames of regime(s) {missing} (have {sorted(known)})")
+    return [r for r in records for _ in range(int(factors.get(r.regime, 1)))]
+
+
 class StereoCropDataset:
     """A ``torch.utils.data.Dataset`` of fixed-size stereo samples (see the module docstring).
 
@@ -114,7 +131,8 @@ class StereoCropDataset:
     """
 
     def __init__(self, root: str | Path, split: str = "train", config: StereoCropConfig = StereoCropConfig(),
-                 *, seed: int = 0, limit: int | None = None, deterministic: bool = False) -> None:
+                 *, seed: int = 0, limit: int | None = None, deterministic: bool = False,
+                 oversample: Mapping[str, int] | None = None) -> None:
         self.root = Path(root)
         self.config = config
         self.seed = int(seed)
@@ -125,6 +143,8 @@ class StereoCropDataset:
             self.records = self.records[: int(limit)]
         if not self.records:
             raise DatasetError(f"{self.root}: no frames in split {split!r}")
+        if oversample:
+            self.records = oversample_records(self.records, oversample)
 
     def __len__(self) -> int:
         return len(self.records)

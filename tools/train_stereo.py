@@ -24,7 +24,7 @@ from typing import Any
 
 import torch
 
-from spacepose.errors import DatasetError
+from spacepose.errors import DatasetError, SpaceposeError
 from spacepose.models.stereo_config import StereoConfig
 from spacepose.tools import training_common as tc
 from spacepose.tools.stereo_data import StereoCropConfig, StereoCropDataset
@@ -62,6 +62,10 @@ class TrainConfig:
     threads: int = 0  # torch.set_num_threads (0 = leave torch's default)
     seed: int = 0
     limit: int | None = None  # use only the first N training frames
+    #: repeat every training frame of a regime this many times per epoch (e.g. {"mixed": 3})
+    oversample: dict[str, int] = field(default_factory=dict)
+    #: warm start: model weights from this checkpoint, fresh optimiser and schedule (fine-tuning)
+    init: str | None = None
     stereo: dict[str, Any] = field(default_factory=dict)  # StereoConfig overrides
 
     def stereo_config(self) -> StereoConfig:
@@ -91,6 +95,20 @@ def model_from_checkpoint(ckpt: dict[str, Any]) -> tuple[torch.nn.Module, Stereo
     model.load_state_dict(ckpt["model"])
     model.eval()
     return model, config
+
+
+def init_from(model: torch.nn.Module, path: str | Path, config: StereoConfig, device: torch.device) -> None:
+    """Load the weights of checkpoint ``path`` into ``model``; its architecture must equal ``config``'s
+    (iteration counts aside, which are not weights)."""
+    ckpt = load_checkpoint(path, map_location=str(device))
+    saved = StereoConfig.from_dict(ckpt["stereo_config"])
+    ignore = {"train_iters": 1, "iters": 0}
+    fields = {f.name for f in dataclasses.fields(StereoConfig)}
+    strip = {k: v for k, v in ignore.items() if k in fields}
+    if saved.replace(**strip) != config.replace(**strip):
+        raise SpaceposeError(f"--init {path}: its model config differs from this run's")
+    model.load_state_dict(ckpt["model"])
+    log.info("initialised weights from %s (trained %s steps)", path, ckpt.get("step"))
 
 
 def _sequence_loss(init_disp, preds, gt, valid, max_disp):
@@ -145,10 +163,13 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         step = tc.resume_training(load_checkpoint(ckpt_path, map_location=str(device)), cfg,
                                   ("variant", "preset", "size", "batch", "stereo"), model, optimizer, scheduler)
         log.info("resumed %s at step %d", ckpt_path, step)
+    elif cfg.init:
+        init_from(model, cfg.init, stereo_cfg, device)
 
     net = tc.wrap_ddp(model, ctx)
 
-    train_set = StereoCropDataset(cfg.dataset, "train", cfg.crop_config(True), seed=cfg.seed, limit=cfg.limit)
+    train_set = StereoCropDataset(cfg.dataset, "train", cfg.crop_config(True), seed=cfg.seed, limit=cfg.limit,
+                                  oversample=cfg.oversample)
     try:
         val_set = StereoCropDataset(cfg.dataset, "test", cfg.crop_config(False), seed=cfg.seed,
                                     limit=cfg.val_samples, deterministic=True)

@@ -175,6 +175,10 @@ class TestBadInput:
         (lambda l, r: (l[:-2, :-2], r[:-2, :-2]), "calibration"),
         (lambda l, r: (np.where(l > 0, np.nan, 0.0), r.astype(np.float64)), "NaN"),
         (lambda l, r: (np.full_like(l, 255), np.full_like(r, 255)), "saturated"),
+        (lambda l, r: (np.full(l.shape, 65535, np.uint16), np.full(r.shape, 65535, np.uint16)), "saturated"),
+        (lambda l, r: (np.full(l.shape, 255.0, np.float32), np.full(r.shape, 255.0, np.float32)), "saturated"),
+        (lambda l, r: (l, np.where((np.arange(r.shape[1]) < 0.6 * r.shape[1])[None, :, None], 255, r).astype(np.uint8)),
+         "saturated"),
     ])
     def test_bad_input_status(self, estimator, make, detail):
         left, right = make(*synthetic_pair())

@@ -34,6 +34,28 @@ class TestKnn:
         np.testing.assert_array_equal(idx[:, 0], np.arange(5))
         np.testing.assert_array_equal(idx[:, 5:], np.repeat(idx[:, 4:5], 3, axis=1))
 
+    @staticmethod
+    def _reference(query, ref, k):
+        d2 = ((query[:, None, :] - ref[None, :, :]) ** 2).sum(-1)
+        return np.argsort(d2, axis=1, kind="stable")[:, :k]  # by distance, then index
+
+    def test_exact_on_a_stereo_like_cloud_with_outliers(self):
+        rng = np.random.default_rng(3)
+        surface = rng.uniform(-2, 2, (1000, 3)) * [1, 1, 0.05] + [0, 0, 20]
+        outliers = rng.uniform(-30, 30, (24, 3)) + [0, 0, 40]
+        xyz = np.concatenate([surface, outliers])
+        np.testing.assert_array_equal(knn_indices(xyz, xyz, 16), self._reference(xyz, xyz, 16))
+        np.testing.assert_array_equal(knn_indices(xyz, xyz[::4], 1), self._reference(xyz, xyz[::4], 1))
+
+    def test_float32_cannot_separate_then_float64_decides(self):
+        """Far from the origin, steps of 1e-6 m vanish in float32: those rows are searched in float64."""
+        rng = np.random.default_rng(4)
+        ref = np.array([1e4, 0.0, 0.0]) + np.column_stack([np.arange(40) * 1e-6, np.zeros(40), np.zeros(40)])
+        ref = np.concatenate([ref, rng.normal(size=(40, 3))])
+        query = ref[rng.permutation(len(ref))[:30]] + 1e-7
+        np.testing.assert_array_equal(knn_indices(query, ref, 8), self._reference(query, ref, 8))
+        np.testing.assert_array_equal(knn_indices(query, ref, 1), self._reference(query, ref, 1))
+
     def test_ties_go_to_lower_index(self):
         ref = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0]])
         np.testing.assert_array_equal(knn_indices(np.zeros((1, 3)), ref, 3), [[0, 1, 2]])
@@ -118,6 +140,21 @@ class TestPixels:
         np.testing.assert_allclose(np.linalg.norm(pixels[idx] - centres, axis=1), d_ref, atol=1e-9)
         with pytest.raises(ValueError, match="stride"):
             pix2pt_indices(pixels, (64, 64), 3)
+
+    @pytest.mark.parametrize("stride", [2, 4, 8])
+    def test_pix2pt_equals_float64_search_ties_included(self, stride):
+        """The float32 fast path gives the float64 search's answer, lowest index on exact ties."""
+        rng = np.random.default_rng(stride)
+        pixels = np.concatenate([rng.integers(0, 128, (300, 2)), rng.integers(0, 128, (50, 2)).repeat(2, axis=0)])
+        w = 128 // stride
+        jj, ii = np.meshgrid(np.arange(w), np.arange(w))
+        centres = np.stack([(jj.ravel() + 0.5) * stride - 0.5, (ii.ravel() + 0.5) * stride - 0.5], axis=1)
+        d2 = ((centres[:, None, :] - pixels[None].astype(float)) ** 2).sum(-1)
+        np.testing.assert_array_equal(pix2pt_indices(pixels, (128, 128), stride), np.argmin(d2, axis=1))
+        # sub-pixel coordinates take the general path and agree too
+        frac = pixels + 0.25
+        d2f = ((centres[:, None, :] - frac[None]) ** 2).sum(-1)
+        np.testing.assert_array_equal(pix2pt_indices(frac, (128, 128), stride), np.argmin(d2f, axis=1))
 
 
 def test_normals_of_a_plane_face_the_camera():

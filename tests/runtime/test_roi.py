@@ -1,3 +1,4 @@
+import cv2
 import numpy as np
 import pytest
 
@@ -90,6 +91,28 @@ class TestWarpToFull:
         t = roi.window_transform(roi.Window(50, 50, 100), (64, 64))
         full = roi.warp_to_full(np.ones((64, 64), np.float32), t, (200, 200))
         assert full[100, 100] == 1.0 and full[10, 10] == 0.0 and full[100, 160] == 0.0
+
+    @pytest.mark.parametrize("window, nearest", [(roi.Window(50, 40, 100), False), (roi.Window(-30, 150, 77), True),
+                                                  (roi.Window(170, -5, 45), False)])
+    def test_equals_whole_frame_warp(self, window, nearest):
+        """Resampling only the window's box gives the whole-frame warp with the outside zeroed (to 1e-4)."""
+        t = roi.window_transform(window, (64, 64))
+        net = np.random.default_rng(0).uniform(1, 9, (64, 64)).astype(np.float32)
+        flags = (cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR) | cv2.WARP_INVERSE_MAP
+        ref = cv2.warpAffine(net, t.matrix, (200, 180), flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        u = np.arange(200) * t.sx + t.tx
+        v = np.arange(180) * t.sy + t.ty
+        ref[~((v >= -0.5) & (v <= 63.5)), :] = 0.0
+        ref[:, ~((u >= -0.5) & (u <= 63.5))] = 0.0
+        out = roi.warp_to_full(net, t, (200, 180), nearest=nearest)
+        assert out.dtype == np.float32 and out.shape == (180, 200)
+        # OpenCV's fixed-point bilinear weights round a little differently for a shifted output box
+        np.testing.assert_allclose(out, ref, atol=1e-3)
+        assert np.count_nonzero(out) > 0
+
+    def test_window_outside_the_frame_gives_zeros(self):
+        t = roi.window_transform(roi.Window(500, 500, 50), (64, 64))
+        assert not roi.warp_to_full(np.ones((64, 64), np.float32), t, (200, 180)).any()
 
     def test_shape_check(self):
         t = roi.window_transform(roi.Window(0, 0, 10), (64, 64))

@@ -72,3 +72,20 @@ def test_train_crop_holds_target_and_keeps_disparity(synthetic_dataset):
         assert a["scale"] == b["scale"]
         # same GT values: a sub-crop does not rescale disparity
         assert set(b["disparity"][b["target"] > 0.5].unique().tolist()) <= set(a["disparity"].unique().tolist())
+
+
+def test_oversample_repeats_a_regime(synthetic_dataset):
+    from spacepose.tools.stereo_data import oversample_records
+
+    records = read_labels(synthetic_dataset, "train")
+    regime = records[0].regime
+    more = oversample_records(records, {regime: 3})
+    n = sum(r.regime == regime for r in records)
+    assert len(more) == len(records) + 2 * n
+    assert [r for r in more if r.regime != regime] == [r for r in records if r.regime != regime]
+    ds = StereoCropDataset(synthetic_dataset, "train", StereoCropConfig(size=(64, 64)), oversample={regime: 2})
+    assert len(ds) == len(records) + n
+    with pytest.raises(DatasetError, match="no frames of regime"):
+        oversample_records(records, {"nosuchregime": 2})
+    with pytest.raises(ValueError):
+        oversample_records(records, {regime: 0})

@@ -64,3 +64,44 @@ def test_torchrun_two_processes(synthetic_dataset, tmp_path):
     doc = json.loads((out / "config.json").read_text())
     assert doc["world_size"] == 2
     assert load_checkpoint(out / "last.pt")["step"] == 2
+
+
+@pytest.mark.slow
+def test_init_fine_tunes_from_weights_with_fresh_schedule(synthetic_dataset, tmp_path):
+    import dataclasses
+
+    base = tmp_path / "base"
+    train_stereo(_cfg(synthetic_dataset, base, 2))
+    saved = load_checkpoint(base / "last.pt")
+    ft = tmp_path / "ft"
+    cfg = dataclasses.replace(_cfg(synthetic_dataset, ft, 1), init=str(base / "last.pt"), val_every=100,
+                              oversample={"mixed": 3})
+    from spacepose.tools import train_stereo as ts
+
+    loaded = {}
+    real = ts.init_from
+
+    def spy(model, path, config, device):
+        real(model, path, config, device)
+        loaded.update({k: v.clone() for k, v in model.state_dict().items()})
+
+    ts.init_from = spy
+    try:
+        train_stereo(cfg)
+    finally:
+        ts.init_from = real
+    for key, value in saved["model"].items():  # the weights it started from are the checkpoint's
+        assert torch.equal(loaded[key], value), key
+    ckpt = load_checkpoint(ft / "last.pt")
+    assert ckpt["step"] == 1 and ckpt["scheduler"]["last_epoch"] == 1  # a new schedule, not the old one's
+    doc = json.loads((ft / "config.json").read_text())
+    assert doc["train_frames"] == 6 + 2 * sum(r == "mixed" for r in _regimes(synthetic_dataset))
+    other = dataclasses.replace(cfg, out=str(tmp_path / "bad"), stereo={**TINY, "reg_widths": [8, 8, 8, 16]})
+    with pytest.raises(SpaceposeError, match="differs"):
+        train_stereo(other)
+
+
+def _regimes(ds):
+    from spacepose.tools.stereo_data import read_labels
+
+    return [r.regime for r in read_labels(ds, "train")]
