@@ -91,10 +91,9 @@ def photometric_consistency(R: np.ndarray, t: np.ndarray, surface: np.ndarray, l
     check_shape(t, (3,), "t")
     check_shape(surface, (None, 3), "surface")
     check_shape(K, (3, 3), "K")
-    grey_l, grey_r = to_grey_float(left), to_grey_float(right)
-    if grey_l.shape != grey_r.shape:
-        raise ValueError(f"left {grey_l.shape} and right {grey_r.shape} differ in size")
-    h, w = grey_l.shape
+    if left.shape[:2] != right.shape[:2]:
+        raise ValueError(f"left {left.shape[:2]} and right {right.shape[:2]} differ in size")
+    h, w = left.shape[:2]
     if len(surface) == 0 or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
         return PhotoConsistency(None, 0, 0)
     pts = np.asarray(surface, np.float64) @ np.asarray(R, np.float64).T + np.asarray(t, np.float64)
@@ -122,6 +121,15 @@ def photometric_consistency(R: np.ndarray, t: np.ndarray, surface: np.ndarray, l
     map_x = (u[:, None] + dx.ravel()[None, :]).astype(np.float32)
     map_y = (v[:, None] + dy.ravel()[None, :]).astype(np.float32)
     shift = d[:, None].astype(np.float32)
+    # only the box the patches sample from is converted to grey (same values: remap reads at most one
+    # pixel beyond a sample, and the box is clipped to the image, where the border rule is the same)
+    x0 = max(int(np.floor(map_x.min() - float(shift_px) - float(shift.max()))) - 1, 0)
+    x1 = min(int(np.ceil(map_x.max() + float(shift_px))) + 2, w)
+    y0 = max(int(np.floor(map_y.min())) - 1, 0)
+    y1 = min(int(np.ceil(map_y.max())) + 2, h)
+    grey_l, grey_r = to_grey_float(left[y0:y1, x0:x1]), to_grey_float(right[y0:y1, x0:x1])
+    map_x -= np.float32(x0)
+    map_y -= np.float32(y0)
 
     def patches(grey: np.ndarray, dx_px: np.ndarray | float) -> np.ndarray:
         p = cv2.remap(grey, map_x + dx_px, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)

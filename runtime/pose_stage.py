@@ -55,6 +55,7 @@ import numpy as np
 from .bundle import VotingConfig
 from .errors import ShapeError, check_shape
 from .fit import fit_rigid
+from .pose_inputs import knn_indices
 from .voting import centre_first_inliers, vote_keypoints
 
 __all__ = ["POSE_STATUSES", "PoseStageResult", "voting_bandwidth", "depth_sigma", "solve_pose", "surface_fitness"]
@@ -245,13 +246,12 @@ def solve_pose(
                            factors=factors, **base)
 
 
-def surface_fitness(R: np.ndarray, t: np.ndarray, points: np.ndarray, surface: np.ndarray, tolerance: float,
-                    chunk: int = 512) -> float:
+def surface_fitness(R: np.ndarray, t: np.ndarray, points: np.ndarray, surface: np.ndarray, tolerance: float) -> float:
     """Share of ``points`` (N, 3, camera frame) within ``tolerance`` metres of the target's surface.
 
     ``surface`` (S, 3) are object-frame surface samples, placed by the pose ``X = R s + t``. A
     correct pose puts the observed target points on the surface (fitness near 1, less the stereo
-    outliers); a wrong one leaves most of them off it. Brute-force nearest neighbours in chunks.
+    outliers); a wrong one leaves most of them off it. Nearest samples by :func:`knn_indices` (exact).
     """
     check_shape(points, (None, 3), "points")
     check_shape(surface, (None, 3), "surface")
@@ -259,10 +259,6 @@ def surface_fitness(R: np.ndarray, t: np.ndarray, points: np.ndarray, surface: n
         return 0.0
     placed = np.asarray(surface, dtype=np.float64) @ np.asarray(R, dtype=np.float64).T + np.asarray(t, dtype=np.float64)
     pts = np.asarray(points, dtype=np.float64)
-    tol2 = float(tolerance) ** 2
-    hits = 0
-    for start in range(0, len(pts), chunk):
-        block = pts[start:start + chunk]
-        d2 = ((block[:, None, :] - placed[None, :, :]) ** 2).sum(axis=-1)
-        hits += int((d2.min(axis=1) <= tol2).sum())
-    return hits / float(len(pts))
+    nearest = knn_indices(pts, placed, 1)[:, 0]
+    d2 = np.einsum("ij,ij->i", pts - placed[nearest], pts - placed[nearest])
+    return float(np.count_nonzero(d2 <= float(tolerance) ** 2)) / float(len(pts))

@@ -77,3 +77,20 @@ def test_grey_scales():
     assert to_grey_float(np.full((2, 2), 65535, np.uint16)).max() == pytest.approx(1.0)
     assert to_grey_float(np.full((2, 2, 3), 255, np.uint8)).max() == pytest.approx(1.0)
     assert to_grey_float(np.full((2, 2), 127.5, np.float32)).max() == pytest.approx(0.5)
+
+
+def test_score_does_not_depend_on_the_frame_around_the_target():
+    """Only the box the patches sample is read: a bigger canvas (shifted principal point) scores the same."""
+    z = 20.0
+    left, right = _render_plane(z, _speckle)
+    surface = _plane_surface()
+    t = np.array([0.0, 0.0, z])
+    base = photometric_consistency(np.eye(3), t, surface, np.dstack([left] * 3), np.dstack([right] * 3), K, B)
+    pad = ((37, 53), (81, 29), (0, 0))
+    big_l, big_r = np.pad(np.dstack([left] * 3), pad), np.pad(np.dstack([right] * 3), pad)
+    K_big = K.copy()
+    K_big[0, 2] += 81
+    K_big[1, 2] += 37
+    big = photometric_consistency(np.eye(3), t, surface, big_l, big_r, K_big, B)
+    assert (big.patches, big.visible) == (base.patches, base.visible)
+    assert big.score == pytest.approx(base.score, abs=1e-5)

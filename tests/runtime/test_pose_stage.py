@@ -201,6 +201,17 @@ class TestSurfaceFitness:
         assert surface_fitness(flipped, t + np.array([0.0, 0.0, 1.5]), observed, self.SURFACE, 0.1) < 0.3
         assert surface_fitness(R, t + np.array([0.0, 0.0, 3.0]), observed, self.SURFACE, 0.1) == 0.0
 
+    @pytest.mark.parametrize("tol", [0.02, 0.1, 0.3])
+    def test_equals_a_kdtree_count(self, tol):
+        from scipy.spatial import cKDTree
+
+        from spacepose.pose_stage import surface_fitness
+
+        R, t = _rotation(5), np.array([0.3, 0.2, 30.0])
+        observed = self.SURFACE @ R.T + t + np.random.default_rng(2).normal(0, 0.1, (600, 3))
+        dist, _ = cKDTree(self.SURFACE @ R.T + t).query(observed)
+        assert surface_fitness(R, t, observed, self.SURFACE, tol) == pytest.approx(np.mean(dist <= tol), abs=1e-12)
+
     def test_degenerate_inputs(self):
         from spacepose.pose_stage import surface_fitness
 
