@@ -23,6 +23,10 @@ def test_session_options_and_metadata(tiny_stereo_graph):
     meta = session_metadata(sess)
     assert meta["kind"] == "stereo" and meta["input_size"] == [64, 64] and meta["iters"] == 2
     assert read_metadata(tiny_stereo_graph) == meta
+    opts = sess.get_session_options()
+    assert opts.intra_op_num_threads == 1 and not opts.enable_cpu_mem_arena
+    # workers sleep between runs, so the pipeline's numpy work between graph calls keeps its cores
+    assert opts.get_session_config_entry("session.intra_op.allow_spinning") == "0"
 
 
 def test_graph_without_contract_is_refused(tmp_path):
