@@ -34,6 +34,7 @@ COMMANDS: dict[str, str] = {
     "eval-pose": "spacepose.tools.cli_eval_pose",
     "export-pose": "spacepose.export.cli_export_pose",
     "quantize": "spacepose.export.cli_quantize",
+    "recover-checkpoint": "spacepose.export.cli_recover",
 }
 
 

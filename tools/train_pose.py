@@ -65,6 +65,8 @@ class TrainPoseConfig:
     seed: int = 0
     limit: int | None = None               # use only the first N training frames
     radius_m: float | None = None          # target radius for the depth window (default: mesh)
+    #: warm start: model weights from this checkpoint, fresh optimiser and schedule (fine-tuning)
+    init: str | None = None
 
     def net_config(self) -> PoseNetConfig:
         overrides = {k: tuple(v) if isinstance(v, list) else v for k, v in self.net.items()}
@@ -100,6 +102,18 @@ def model_from_checkpoint(ckpt: dict[str, Any]) -> tuple[torch.nn.Module, PoseNe
     model.load_state_dict(ckpt["model"])
     model.eval()
     return model, config
+
+
+def init_from(model: torch.nn.Module, path: str | Path, config: PoseNetConfig) -> list[str]:
+    """Load the weights of pose checkpoint ``path`` (a training run's, or one that ``spacepose
+    recover-checkpoint`` rebuilt from a graph) into ``model``, whose config must equal the checkpoint's.
+    Returns the checkpoint's folded BatchNorms, which must train frozen."""
+    ckpt = load_checkpoint(path)
+    if PoseNetConfig.from_dict(ckpt["net_config"]) != config:
+        raise SpaceposeError(f"--init {path}: its network config differs from this run's")
+    model.load_state_dict(ckpt["model"])
+    log.info("initialised weights from %s (trained %s steps)", path, ckpt.get("step"))
+    return list(ckpt.get("folded_bn") or [])
 
 
 def _forward(net: torch.nn.Module, names: list[str], batch: dict[str, Any], device: torch.device):
@@ -167,11 +181,16 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr_min)
     scheduler = cyclic_scheduler(optimizer, cfg.steps, cfg.lr_min, cfg.lr_max, cfg.cycles)
     step = 0
+    folded: list[str] = []
     if resume:
-        step = tc.resume_training(load_checkpoint(ckpt_path, map_location=str(device)), cfg,
-                                  ("preset", "net", "fusion", "attention", "batch", "depth_source"), model, optimizer,
-                                  scheduler)
+        ckpt = load_checkpoint(ckpt_path, map_location=str(device))
+        folded = list(ckpt.get("folded_bn") or [])
+        step = tc.resume_training(ckpt, cfg, ("preset", "net", "fusion", "attention", "batch", "depth_source"), model,
+                                  optimizer, scheduler)
         log.info("resumed %s at step %d", ckpt_path, step)
+    elif cfg.init:
+        folded = init_from(model, cfg.init, net_cfg)
+    tc.freeze_folded_batchnorm(model, folded)
 
     net = tc.wrap_ddp(model, ctx)
     names = model.input_names
@@ -200,7 +219,7 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
                         "centre": train_set.centre.tolist(), "target": train_set.target, "radius_m": train_set.radius_m,
                         "rig": {"image_size": info.get("size"), "focal_px": train_set.focal_px,
                                 "baseline_m": train_set.baseline_m},
-                        "commit": git_commit(), "dataset": dataset_doc}, ckpt_path)
+                        "commit": git_commit(), "dataset": dataset_doc, "folded_bn": folded}, ckpt_path)
 
     def train_step(batch: dict[str, Any]) -> tuple[dict[str, float], float, float]:
         seg, kp, ctr = _forward(net, names, batch, device)

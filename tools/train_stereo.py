@@ -97,9 +97,10 @@ def model_from_checkpoint(ckpt: dict[str, Any]) -> tuple[torch.nn.Module, Stereo
     return model, config
 
 
-def init_from(model: torch.nn.Module, path: str | Path, config: StereoConfig, device: torch.device) -> None:
+def init_from(model: torch.nn.Module, path: str | Path, config: StereoConfig, device: torch.device) -> list[str]:
     """Load the weights of checkpoint ``path`` into ``model``; its architecture must equal ``config``'s
-    (iteration counts aside, which are not weights)."""
+    (iteration counts aside, which are not weights). Returns the checkpoint's folded BatchNorms (a
+    checkpoint rebuilt from a graph by ``spacepose recover-checkpoint``), which must train frozen."""
     ckpt = load_checkpoint(path, map_location=str(device))
     saved = StereoConfig.from_dict(ckpt["stereo_config"])
     ignore = {"train_iters": 1, "iters": 0}
@@ -109,6 +110,7 @@ def init_from(model: torch.nn.Module, path: str | Path, config: StereoConfig, de
         raise SpaceposeError(f"--init {path}: its model config differs from this run's")
     model.load_state_dict(ckpt["model"])
     log.info("initialised weights from %s (trained %s steps)", path, ckpt.get("step"))
+    return list(ckpt.get("folded_bn") or [])
 
 
 def _sequence_loss(init_disp, preds, gt, valid, max_disp):
@@ -159,12 +161,16 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     scheduler = torch.optim.lr_scheduler.OneCycleLR(optimizer, cfg.lr, total_steps=cfg.steps + 100, pct_start=0.01,
                                                     cycle_momentum=False, anneal_strategy="linear")
     step = 0
+    folded: list[str] = []
     if resume:
-        step = tc.resume_training(load_checkpoint(ckpt_path, map_location=str(device)), cfg,
-                                  ("variant", "preset", "size", "batch", "stereo"), model, optimizer, scheduler)
+        ckpt = load_checkpoint(ckpt_path, map_location=str(device))
+        folded = list(ckpt.get("folded_bn") or [])
+        step = tc.resume_training(ckpt, cfg, ("variant", "preset", "size", "batch", "stereo"), model, optimizer,
+                                  scheduler)
         log.info("resumed %s at step %d", ckpt_path, step)
     elif cfg.init:
-        init_from(model, cfg.init, stereo_cfg, device)
+        folded = init_from(model, cfg.init, stereo_cfg, device)
+    tc.freeze_folded_batchnorm(model, folded)
 
     net = tc.wrap_ddp(model, ctx)
 
@@ -189,7 +195,7 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         tc.atomic_save({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
                         "scheduler": scheduler.state_dict(), "step": step, "rng": tc.rng_state(),
                         "train_config": tc.to_json(dataclasses.asdict(cfg)),
-                        "stereo_config": stereo_cfg.to_dict(), "commit": git_commit(),
+                        "stereo_config": stereo_cfg.to_dict(), "commit": git_commit(), "folded_bn": folded,
                         "dataset": {"path": str(cfg.dataset), "train_frames": len(train_set)}}, ckpt_path)
 
     def train_step(batch: dict[str, Any]) -> tuple[dict[str, float], float, float]:

@@ -12,7 +12,7 @@ import os
 import random
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 import torch
@@ -108,6 +108,18 @@ def load_checkpoint(path: str | Path, map_location: str = "cpu", kind: str | Non
         raise SpaceposeError(f"{p} is not a {kind} checkpoint "
                              f"(kind={ckpt.get('kind') if isinstance(ckpt, dict) else None!r})")
     return ckpt
+
+
+def freeze_folded_batchnorm(model: torch.nn.Module, folded: Sequence[str]) -> None:
+    """Freeze the BatchNorms of a model whose BatchNorms are folded identities (``folded`` non-empty:
+    weights rebuilt from a graph by ``spacepose recover-checkpoint``); see
+    :func:`spacepose.export.recover.freeze_batchnorm`."""
+    if not folded:
+        return
+    from spacepose.export.recover import freeze_batchnorm
+
+    n = freeze_batchnorm(model)
+    log.info("%d BatchNorms frozen (weights from a graph: %d folded)", n, len(folded))
 
 
 def dist_setup() -> tuple[int, int, int]:

@@ -70,3 +70,37 @@ def test_cli_arguments():
     cfg = TrainPoseConfig(dataset="DS", out="o", net=dict(args.net), fusion=args.fusion, attention=args.attention)
     net = cfg.net_config()
     assert net.crop_size == (64, 64) and net.fusion == "rgb2pt" and net.attention == "vanilla"
+
+
+@pytest.mark.slow
+def test_init_from_a_shipped_graph_fine_tunes_with_frozen_batchnorm(tmp_path_factory, tmp_path):
+    """train -> export -> recover-checkpoint -> train-pose --init: the BatchNorms (folded identities)
+    keep their statistics through fine-tuning and its resume; the other weights move."""
+    from spacepose.export.onnx_pose import export_checkpoint
+    from spacepose.export.recover import checkpoint_from_graph
+    from spacepose.tools.training_common import atomic_save
+
+    root = pose_dataset(tmp_path_factory)
+    base = train_tiny(root, tmp_path / "base", steps=1)
+    graph = export_checkpoint(base, tmp_path / "pose.onnx", geometry={"mesh_scale": 1.0, "radius": 2.6,
+                                                                       "bbox_min": [-2.5, -1.5, -0.3],
+                                                                       "bbox_max": [2.5, 1.5, 1.0]})["path"]
+    recovered = checkpoint_from_graph(graph)
+    assert recovered["folded_bn"] and recovered["step"] == 1
+    init = tmp_path / "recovered.pt"
+    atomic_save(recovered, init)
+    out = tmp_path / "ft"
+    train_tiny(root, out, steps=2, init=str(init))
+    ckpt = load_checkpoint(out / "last.pt")
+    assert ckpt["folded_bn"] == recovered["folded_bn"]
+    stats = [k for k in recovered["model"] if k.endswith("running_mean") or k.endswith("running_var")]
+    assert stats and all(torch.equal(ckpt["model"][k], recovered["model"][k]) for k in stats)
+    moved = [k for k in recovered["model"] if k.endswith("weight") and not torch.equal(ckpt["model"][k], recovered["model"][k])]
+    assert moved
+    cfg = TrainPoseConfig(**{**json.loads((out / "config.json").read_text())["train"], "steps": 3})
+    train_pose(cfg, resume=True)
+    again = load_checkpoint(out / "last.pt")
+    assert again["step"] == 3 and all(torch.equal(again["model"][k], recovered["model"][k]) for k in stats)
+    bad = TrainPoseConfig(**{**cfg.__dict__, "out": str(tmp_path / "bad"), "net": {**cfg.net, "head_width": 8}})
+    with pytest.raises(SpaceposeError, match="differs"):
+        train_pose(bad)

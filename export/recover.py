@@ -1,0 +1,283 @@
+"""Recover torch weights from an exported ONNX graph, so a shipped model can be fine-tuned.
+
+A shipped bundle holds ONNX graphs, not training checkpoints. The exporter keeps most parameters under
+their ``state_dict`` names, but it folds every BatchNorm into the convolution before it (the graph
+holds ``W * g / sqrt(v + eps)`` and ``b - m * g / sqrt(v + eps)`` as anonymous ``onnx::Conv_*``
+tensors) and stores ``nn.Linear`` weights transposed for ``MatMul``.
+
+:func:`recover_state_dict` undoes this with a *probe*: a copy of the model whose every parameter is
+filled with distinct random values and whose BatchNorms are made near-identities (gamma, variance
+1 +- 0.1 %, mean +- 0.001, random beta) is exported with the same exporter. In the probe graph each
+initializer then equals one parameter (flattened, or transposed for a 2-D weight), so its source
+is found by value. The shipped graph must have the same nodes in the same order; its initializer at
+the same (node, input) position is written back through that map. A folded BatchNorm comes back as
+an identity BatchNorm (gamma 1, mean 0, variance 1 - eps) carrying the folded bias, with the folded
+weight in the convolution: the eval-mode function is exact, so fine-tune such a model with its
+BatchNorms frozen (:func:`freeze_batchnorm`).
+
+The caller checks the result against onnxruntime (``tests/export/test_recover.py`` does).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import logging
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+from torch import nn
+
+from spacepose.errors import SpaceposeError
+
+__all__ = ["RecoveryReport", "recover_state_dict", "freeze_batchnorm", "checkpoint_from_graph", "checkpoint_folds_bn"]
+
+log = logging.getLogger(__name__)
+
+_BN = (nn.BatchNorm1d, nn.BatchNorm2d, nn.BatchNorm3d)
+
+
+@dataclass(frozen=True)
+class RecoveryReport:
+    """What :func:`recover_state_dict` set: ``recovered`` state keys, ``folded_bn`` BatchNorm module
+    names rebuilt as identities, and ``missing`` float state keys no graph initializer fed (parameters the
+    exported forward never reads, e.g. training-only heads; left at their values in ``model``)."""
+
+    recovered: tuple[str, ...]
+    folded_bn: tuple[str, ...]
+    missing: tuple[str, ...]
+
+
+def _initializer_positions(proto) -> tuple[list[str], list[tuple[int, int, str]]]:
+    """Op types of the non-Identity nodes, and (node index, input index, initializer name) for every
+    input of those nodes that is an initializer, directly or through Identity nodes (the exporter
+    deduplicates equal initializers with Identity nodes, so their number depends on the values)."""
+    names = {init.name for init in proto.graph.initializer}
+    alias: dict[str, str] = {}
+    for node in proto.graph.node:
+        if node.op_type == "Identity" and len(node.input) == 1:
+            src = alias.get(node.input[0], node.input[0])
+            if src in names:
+                alias[node.output[0]] = src
+    nodes = [n for n in proto.graph.node if not (n.op_type == "Identity" and n.output[0] in alias)]
+    positions = [(i, j, alias.get(x, x)) for i, node in enumerate(nodes) for j, x in enumerate(node.input)
+                 if alias.get(x, x) in names]
+    return [n.op_type for n in nodes], positions
+
+
+def _probe(model: nn.Module, seed: int) -> tuple[nn.Module, dict[str, str]]:
+    """Copy of ``model`` with distinct random floats everywhere and identity BatchNorms (random beta).
+
+    Returns the probe and, for each BatchNorm bias key, its module name."""
+    probe = copy.deepcopy(model).eval()
+    gen = torch.Generator().manual_seed(seed)
+    bn_of_bias: dict[str, str] = {}
+    with torch.no_grad():
+        for name, module in probe.named_modules():
+            if isinstance(module, _BN):
+                bn_of_bias[f"{name}.bias" if name else "bias"] = name
+        for key, tensor in probe.state_dict(keep_vars=True).items():
+            if not tensor.is_floating_point():
+                continue
+            tensor.copy_(torch.randn(tensor.shape, generator=gen) * 0.5 + 0.01)
+        for name, module in probe.named_modules():
+            if isinstance(module, _BN) and module.affine and module.track_running_stats:
+                # distinct gammas (no deduplicated initializers) close to 1 (a folded conv stays recognisable)
+                module.weight.copy_(1.0 + 1e-3 * torch.randn(module.weight.shape, generator=gen))
+                module.running_mean.copy_(1e-3 * torch.randn(module.running_mean.shape, generator=gen))
+                module.running_var.copy_(1.0 + 1e-3 * torch.randn(module.running_var.shape, generator=gen))
+    return probe, bn_of_bias
+
+
+def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, bool] | None:
+    """The state key whose values are closest to ``value`` flattened (False) or as a 2-D transpose
+    (True), if within 1 % (a folded BatchNorm scales a convolution by its probe gamma, 1 +- 0.3 %)."""
+    flat = value.reshape(-1).astype(np.float64)
+    scale = float(np.max(np.abs(flat))) + 1e-12
+    best: tuple[float, str, bool] | None = None
+    for key, ref in candidates.items():
+        if ref.size != flat.size:
+            continue
+        options = [(ref.reshape(-1), False)]
+        if ref.ndim == 2 and value.shape == ref.shape[::-1]:
+            options.append((ref.T.reshape(-1), True))
+        for arr, transposed in options:
+            err = float(np.max(np.abs(arr - flat))) / scale
+            if best is None or err < best[0]:
+                best = (err, key, transposed)
+    if best is None or best[0] > 1e-2:
+        return None
+    return best[1], best[2]
+
+
+def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
+                       export: Callable[[nn.Module, Path], object], *, prefix: str = "",
+                       seed: int = 0) -> RecoveryReport:
+    """Load the weights of the graph at ``onnx_path`` into ``model`` (in place).
+
+    Args:
+        model: a freshly built model of the graph's architecture (its config from the graph metadata).
+        onnx_path: the exported graph.
+        export: ``export(module, path)`` writes ``module`` to ``path`` exactly as ``onnx_path`` was
+            written (same wrapper, input size, iteration count, opset).
+        prefix: prefix of the graph's parameter names (``"model."`` when a wrapper held the model).
+        seed: seed of the probe's random values.
+
+    Raises:
+        SpaceposeError: the graphs differ in structure, or a graph initializer has no source.
+    """
+    import onnx
+    from onnx import numpy_helper
+
+    shipped = onnx.load(str(onnx_path))
+    probe, bn_of_bias = _probe(model, seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        probe_path = Path(tmp) / "probe.onnx"
+        export(probe, probe_path)
+        probe_proto = onnx.load(str(probe_path))
+    ops_a, pos_a = _initializer_positions(probe_proto)
+    ops_b, pos_b = _initializer_positions(shipped)
+    if ops_a != ops_b:
+        raise SpaceposeError(f"{onnx_path}: graph structure differs from this model's export "
+                             f"({len(ops_b)} vs {len(ops_a)} nodes); is the config the one it was exported with?")
+    if [p[:2] for p in pos_a] != [p[:2] for p in pos_b]:
+        raise SpaceposeError(f"{onnx_path}: initializers sit at other node inputs than in this model's export")
+    probe_vals = {i.name: numpy_helper.to_array(i) for i in probe_proto.graph.initializer}
+    shipped_vals = {i.name: numpy_helper.to_array(i) for i in shipped.graph.initializer}
+    state = model.state_dict()
+    probe_state = {k: v.detach().cpu().numpy() for k, v in probe.state_dict().items() if v.is_floating_point()}
+    by_name = {prefix + k: k for k in probe_state}
+
+    assigned: dict[str, np.ndarray] = {}
+    folded: set[str] = set()
+    for (_, _, name_a), (_, _, name_b) in zip(pos_a, pos_b):
+        value_a, value_b = probe_vals[name_a], shipped_vals[name_b]
+        if value_a.dtype.kind != "f":
+            continue                                    # shapes, indices: not weights
+        key = by_name.get(name_a)
+        transposed = False
+        if key is None or probe_state[key].size != value_a.size or not np.allclose(
+                probe_state[key].reshape(-1), value_a.reshape(-1), rtol=1e-6, atol=1e-7):
+            found = _match(value_a, probe_state)
+            if found is None:
+                if value_a.size <= 1:
+                    continue                            # a folded scalar constant (eps, scale)
+                raise SpaceposeError(f"{onnx_path}: initializer {name_b} {list(value_b.shape)} has no source parameter")
+            key, transposed = found
+        value = value_b.T if transposed else value_b
+        assigned[key] = np.ascontiguousarray(value).reshape(state[key].shape)
+        if key in bn_of_bias and not name_a.startswith(prefix + key):
+            folded.add(bn_of_bias[key])
+
+    modules = dict(model.named_modules())
+    with torch.no_grad():
+        for key, value in assigned.items():
+            state[key].copy_(torch.from_numpy(value.astype(np.float32)))
+        for name in sorted(folded):
+            bn = modules[name]
+            bn.weight.fill_(1.0)
+            bn.running_mean.zero_()
+            bn.running_var.fill_(1.0 - bn.eps)
+    set_by_fold = {f"{n}.{s}" for n in folded for s in ("weight", "running_mean", "running_var")}
+    missing = tuple(k for k, v in state.items()
+                    if v.is_floating_point() and k not in assigned and k not in set_by_fold)
+    if missing:
+        log.warning("%d state entries not in %s (left as they were): %s", len(missing), onnx_path, ", ".join(missing[:8]))
+    log.info("recovered %d tensors from %s (%d folded BatchNorms)", len(assigned), onnx_path, len(folded))
+    return RecoveryReport(tuple(sorted(assigned)), tuple(sorted(folded)), missing)
+
+
+class _FrozenBN:
+    """Mixin: a BatchNorm that stays in eval mode (running statistics) whatever ``train()`` says."""
+
+    def train(self, mode: bool = True):  # noqa: D401 - nn.Module API
+        super().train(False)
+        return self
+
+
+_FROZEN = {cls: type(f"Frozen{cls.__name__}", (_FrozenBN, cls), {}) for cls in _BN}
+
+
+def freeze_batchnorm(model: nn.Module) -> int:
+    """Make every BatchNorm of ``model`` keep its running statistics in training; returns how many.
+
+    A recovered model's BatchNorms hold folded identities, not batch statistics, so they must not
+    renormalise by batch while the rest fine-tunes. Their affine parameters still train. The state
+    keys and the exported graph are those of ordinary BatchNorms.
+    """
+    n = 0
+    for module in model.modules():
+        if type(module) in _FROZEN:
+            module.__class__ = _FROZEN[type(module)]
+            module.train(False)
+            n += 1
+    return n
+
+
+def _graph_metadata(onnx_path: str | os.PathLike) -> dict:
+    import json
+
+    import onnx
+
+    proto = onnx.load(str(onnx_path), load_external_data=False)
+    props = {p.key: p.value for p in proto.metadata_props}
+    if "spacepose" not in props:
+        raise SpaceposeError(f"{onnx_path}: no spacepose metadata; not a graph this project exported")
+    return json.loads(props["spacepose"])
+
+
+def checkpoint_from_graph(onnx_path: str | os.PathLike) -> dict:
+    """A training checkpoint (the trainers' format, usable with ``--init``) rebuilt from a shipped graph.
+
+    The graph's metadata names its kind and config. The checkpoint carries ``folded_bn`` (fine-tune
+    with frozen BatchNorms), ``step`` = the training steps the metadata records, and ``source`` =
+    the graph path; it holds no optimiser state. The recovered model is checked against onnxruntime
+    on the exporter's parity inputs; a difference above the exporters' tolerances raises.
+    """
+    from spacepose.export import onnx_pose, onnx_stereo
+
+    meta = _graph_metadata(onnx_path)
+    kind = meta.get("kind")
+    training = meta.get("training") or {}
+    if kind == "stereo":
+        from spacepose.models.stereo_config import StereoConfig
+        from spacepose.models.tsca_stereo import TSCAStereo
+
+        config = StereoConfig.from_dict(meta["config"])
+        size, iters = tuple(int(v) for v in meta["input_size"]), int(meta["iters"])
+        model = TSCAStereo(config).eval()
+        report = recover_state_dict(model, onnx_path, lambda m, p: onnx_stereo.export_stereo(
+            m, p, size=size, iters=iters, metadata={}, force=True), prefix="model.")
+        diff = onnx_stereo.parity_check(model, onnx_path, size=size, iters=iters)
+        tolerance = 1e-3
+        ckpt = {"kind": "stereo", "stereo_config": config.to_dict()}
+    elif kind == "pose":
+        from spacepose.models.pose_config import PoseNetConfig
+        from spacepose.models.pose_net import PoseNet
+
+        config = PoseNetConfig.from_dict(meta["config"])
+        model = PoseNet(config).eval()
+        report = recover_state_dict(model, onnx_path, lambda m, p: onnx_pose.export_pose(
+            m, p, metadata={}, force=True))
+        diff = onnx_pose.parity_check(model, onnx_path)["max"]
+        tolerance = 1e-3
+        ckpt = {"kind": "pose", "net_config": dataclasses.asdict(config), "keypoints": meta.get("keypoints"),
+                "centre": meta.get("centre"), "target": meta.get("target")}
+    else:
+        raise SpaceposeError(f"{onnx_path}: metadata kind {kind!r} is neither 'stereo' nor 'pose'")
+    if not diff < tolerance:
+        raise SpaceposeError(f"{onnx_path}: the recovered model differs from the graph by {diff:.3g} (> {tolerance})")
+    log.info("%s: recovered %s model matches the graph to %.2g", onnx_path, kind, diff)
+    ckpt.update({"model": model.state_dict(), "step": int(training.get("step") or 0), "source": str(onnx_path),
+                 "folded_bn": list(report.folded_bn), "not_in_graph": list(report.missing), "parity": float(diff)})
+    return ckpt
+
+
+def checkpoint_folds_bn(ckpt: dict) -> bool:
+    """Whether a checkpoint's BatchNorms are folded identities (fine-tune with :func:`freeze_batchnorm`)."""
+    return bool(ckpt.get("folded_bn"))

@@ -1,0 +1,140 @@
+"""Weights recovered from an exported graph reproduce it, and fine-tune with frozen BatchNorms."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+onnx = pytest.importorskip("onnx")
+
+from spacepose.errors import SpaceposeError  # noqa: E402
+from spacepose.export import onnx_pose, onnx_stereo  # noqa: E402
+from spacepose.export.metadata import stereo_metadata  # noqa: E402
+from spacepose.export.recover import (checkpoint_from_graph, freeze_batchnorm,  # noqa: E402
+                                      recover_state_dict)
+from spacepose.models.pose_config import PoseNetConfig  # noqa: E402
+from spacepose.models.pose_net import PoseNet  # noqa: E402
+from spacepose.models.stereo_config import StereoConfig  # noqa: E402
+from spacepose.models.tsca_stereo import TSCAStereo  # noqa: E402
+
+SIZE, ITERS = (64, 32), 2
+NET = PoseNetConfig(crop_size=(64, 64), n_points=128, k=8, n_levels=2, ratio=4, rgb_stem=8, rgb_widths=(16, 16),
+                    rgb_bottleneck=16, rgb_out=8, point_stem=8, point_widths=(16, 16), point_bottleneck=16, head_width=16)
+
+
+def _randomise_batchnorm(model, seed):
+    """Non-trivial BatchNorm statistics, as after training (folding then changes the conv weights)."""
+    gen = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for m in model.modules():
+            if isinstance(m, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d, torch.nn.BatchNorm3d)):
+                m.weight.copy_(0.5 + torch.rand(m.weight.shape, generator=gen))
+                m.bias.copy_(0.2 * torch.randn(m.bias.shape, generator=gen))
+                m.running_mean.copy_(0.3 * torch.randn(m.running_mean.shape, generator=gen))
+                m.running_var.copy_(0.5 + torch.rand(m.running_var.shape, generator=gen))
+    return model.eval()
+
+
+def _export_stereo(model, path):
+    return onnx_stereo.export_stereo(model, path, size=SIZE, iters=ITERS, metadata={}, force=True)
+
+
+@pytest.fixture(scope="module")
+def stereo_graph(tmp_path_factory):
+    torch.manual_seed(0)
+    cfg = StereoConfig.cpu()
+    model = _randomise_batchnorm(TSCAStereo(cfg), 1)
+    path = tmp_path_factory.mktemp("rec") / "stereo.onnx"
+    meta = stereo_metadata(input_size=SIZE, iters=ITERS, stereo_config=cfg.to_dict(), dataset={"seed": 1, "size": 4},
+                           extra={"training": {"step": 33}})
+    onnx_stereo.export_stereo(model, path, size=SIZE, iters=ITERS, metadata=meta)
+    return path, model, cfg
+
+
+def test_stereo_weights_come_back(stereo_graph):
+    path, original, cfg = stereo_graph
+    torch.manual_seed(123)                                   # other random weights
+    model = TSCAStereo(cfg).eval()
+    report = recover_state_dict(model, path, _export_stereo, prefix="model.")
+    assert report.folded_bn                                  # the exporter folded BatchNorms into convs
+    # only the training-time upsampler of the initial disparity is absent from an inference graph
+    assert all(k.startswith("init_mask.") for k in report.missing)
+    left, right = (torch.from_numpy(a) for a in onnx_stereo.parity_inputs(SIZE))
+    with torch.no_grad():
+        want = original(left, right, iters=ITERS, test_mode=True)
+        got = model(left, right, iters=ITERS, test_mode=True)
+    assert float(torch.max(torch.abs(got - want))) < 1e-3
+    assert onnx_stereo.parity_check(model, path, size=SIZE, iters=ITERS) < 1e-3
+    # the folded BatchNorm is an identity carrying the folded bias
+    bn = dict(model.named_modules())[report.folded_bn[0]]
+    assert torch.allclose(bn.weight, torch.ones_like(bn.weight))
+    assert torch.allclose(bn.running_mean, torch.zeros_like(bn.running_mean))
+
+
+def test_recover_rejects_another_architecture(stereo_graph):
+    path, _, cfg = stereo_graph
+    other = TSCAStereo(cfg.replace(variant="igev")).eval()
+    with pytest.raises(SpaceposeError, match="structure differs|other node inputs"):
+        recover_state_dict(other, path, _export_stereo, prefix="model.")
+
+
+def test_pose_weights_come_back(tmp_path):
+    torch.manual_seed(0)
+    original = _randomise_batchnorm(PoseNet(NET), 2)
+    path = onnx_pose.export_pose(original, tmp_path / "pose.onnx", metadata={})
+    torch.manual_seed(5)
+    model = PoseNet(NET).eval()
+    report = recover_state_dict(model, path, lambda m, p: onnx_pose.export_pose(m, p, metadata={}, force=True))
+    assert report.missing == () and report.folded_bn
+    assert onnx_pose.parity_check(model, path)["max"] < 1e-4
+
+
+def test_frozen_batchnorm_keeps_running_statistics_in_training():
+    torch.manual_seed(0)
+    model = _randomise_batchnorm(PoseNet(NET), 3)
+    keys = list(model.state_dict())
+    assert freeze_batchnorm(model) > 0
+    model.train()
+    bns = [m for m in model.modules() if isinstance(m, torch.nn.BatchNorm2d)]
+    assert bns and all(not m.training for m in bns)
+    before = [m.running_mean.clone() for m in bns]
+    x = torch.randn(2, 3, 64, 64) * 50 + 100
+    model.rgb.stem(model.rgb.normalise(x))
+    assert all(torch.equal(a, m.running_mean) for a, m in zip(before, bns))   # no statistics update
+    assert all(m.weight.requires_grad for m in bns)                           # affine still trains
+    assert list(model.state_dict()) == keys
+
+
+def test_checkpoint_from_graph_feeds_training(stereo_graph, tmp_path):
+    path, _, cfg = stereo_graph
+    ckpt = checkpoint_from_graph(path)
+    assert ckpt["kind"] == "stereo" and ckpt["step"] == 33 and ckpt["parity"] < 1e-3 and ckpt["folded_bn"]
+    assert StereoConfig.from_dict(ckpt["stereo_config"]) == cfg
+    model = TSCAStereo(cfg)
+    model.load_state_dict(ckpt["model"])
+
+
+def test_checkpoint_from_pose_graph_keeps_target(tmp_path):
+    torch.manual_seed(0)
+    model = _randomise_batchnorm(PoseNet(NET), 4)
+    kp = np.random.default_rng(0).uniform(-2, 2, size=(8, 3))
+    meta = onnx_pose.pose_metadata(NET, keypoints=kp, centre=np.zeros(3), target="tdrs", extra={"training": {"step": 9}})
+    path = onnx_pose.export_pose(model, tmp_path / "pose.onnx", metadata=meta)
+    ckpt = checkpoint_from_graph(path)
+    assert ckpt["kind"] == "pose" and ckpt["target"] == "tdrs" and ckpt["step"] == 9
+    assert np.allclose(ckpt["keypoints"], kp)
+    assert PoseNetConfig.from_dict(ckpt["net_config"]) == NET
+    assert dataclasses.asdict(NET) == ckpt["net_config"]
+
+
+def test_checkpoint_from_graph_rejects_foreign_graph(tmp_path):
+    from onnx import TensorProto, helper
+
+    graph = helper.make_graph([helper.make_node("Relu", ["x"], ["y"])], "g",
+                              [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])],
+                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])])
+    path = tmp_path / "foreign.onnx"
+    onnx.save(helper.make_model(graph), str(path))
+    with pytest.raises(SpaceposeError, match="no spacepose metadata"):
+        checkpoint_from_graph(path)
