@@ -2,7 +2,9 @@
 
 loss = smooth_L1(init_disp, gt) + sum_i gamma_N^(N-1-i) * L1(preds[i], gt),
 gamma_N = gamma^(15 / (N - 1)) (N = 1: the single prediction has weight 1), means over the valid
-pixels: ``valid & finite(gt) & gt < max_disp``. An empty mask gives loss 0 (no NaN).
+pixels: ``valid & finite(gt) & gt < max_disp``. An empty mask gives loss 0 (no NaN). An optional
+per-pixel ``weight`` turns the means into weighted means (training weighs target pixels above the
+background so the loss follows the metric, which is taken on target pixels); metrics stay unweighted.
 """
 
 from __future__ import annotations
@@ -23,7 +25,10 @@ def sequence_weights(n: int, gamma: float = 0.9) -> list[float]:
     return [adjusted ** (n - 1 - i) for i in range(n)]
 
 
-def _masked_mean(values: torch.Tensor, mask: torch.Tensor, count: torch.Tensor) -> torch.Tensor:
+def _masked_mean(values: torch.Tensor, mask: torch.Tensor, count: torch.Tensor,
+                 weight: torch.Tensor | None = None) -> torch.Tensor:
+    if weight is not None:
+        values = values * weight
     return torch.where(mask, values, torch.zeros_like(values)).sum() / count
 
 
@@ -34,8 +39,10 @@ def sequence_loss(
     valid: torch.Tensor,
     max_disp: float,
     gamma: float = 0.9,
+    weight: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict[str, float]]:
-    """init_disp, preds[i], gt (B, 1, H, W) float; valid (B, 1, H, W) bool.
+    """init_disp, preds[i], gt (B, 1, H, W) float; valid (B, 1, H, W) bool; weight None or
+    (B, 1, H, W) float >= 0 (per-pixel loss weight).
 
     Returns (scalar loss, {"epe", "bad1", "bad3"} of the last prediction; bad in % of valid px).
     """
@@ -44,10 +51,17 @@ def sequence_loss(
     gt_safe = torch.nan_to_num(gt, nan=0.0, posinf=0.0, neginf=0.0)
     mask = valid.bool() & torch.isfinite(gt) & (gt < max_disp)
     count = mask.sum().clamp(min=1).to(gt.dtype)
+    if weight is not None:
+        if weight.shape != gt.shape:
+            raise ShapeError("weight must have the shape of gt")
+        weight = weight.to(gt.dtype)
+        loss_count = torch.where(mask, weight, torch.zeros_like(weight)).sum().clamp(min=1e-6)
+    else:
+        loss_count = count
 
-    loss = _masked_mean(F.smooth_l1_loss(init_disp, gt_safe, reduction="none"), mask, count)
-    for weight, pred in zip(sequence_weights(len(preds), gamma), preds):
-        loss = loss + weight * _masked_mean((pred - gt_safe).abs(), mask, count)
+    loss = _masked_mean(F.smooth_l1_loss(init_disp, gt_safe, reduction="none"), mask, loss_count, weight)
+    for seq_weight, pred in zip(sequence_weights(len(preds), gamma), preds):
+        loss = loss + seq_weight * _masked_mean((pred - gt_safe).abs(), mask, loss_count, weight)
 
     with torch.no_grad():
         err = (preds[-1] - gt_safe).abs()

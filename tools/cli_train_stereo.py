@@ -29,6 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="list every training frame of REGIME K times per epoch (e.g. mixed=3 penumbra=2)")
     parser.add_argument("--init", type=Path, default=None,
                         help="fine-tune: start from this checkpoint's weights with a fresh optimiser and schedule")
+    parser.add_argument("--target-weight", type=float, default=1.0,
+                        help="loss weight of target pixels relative to the background's (default 1: plain mean)")
     add_loop_arguments(parser, workers=0)
 
 
@@ -56,7 +58,9 @@ def run(args: argparse.Namespace) -> int:
                       ckpt_every=args.ckpt_every, val_every=args.val_every, val_samples=args.val_samples,
                       log_every=args.log_every, workers=args.workers, threads=args.threads, seed=args.seed,
                       limit=args.limit, oversample=dict(args.oversample),
-                      init=str(args.init) if args.init else None)
+                      init=str(args.init) if args.init else None, target_weight=args.target_weight)
+    if not args.target_weight > 0:
+        raise SystemExit("--target-weight must be > 0")
     if args.init and args.resume:
         raise SystemExit("--init starts a new run; --resume continues one: give one of them")
     summary = train_stereo(cfg, resume=args.resume)

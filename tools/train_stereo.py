@@ -66,6 +66,8 @@ class TrainConfig:
     oversample: dict[str, int] = field(default_factory=dict)
     #: warm start: model weights from this checkpoint, fresh optimiser and schedule (fine-tuning)
     init: str | None = None
+    #: loss weight of target pixels relative to background pixels (1: plain mean over valid pixels)
+    target_weight: float = 1.0
     stereo: dict[str, Any] = field(default_factory=dict)  # StereoConfig overrides
 
     def stereo_config(self) -> StereoConfig:
@@ -113,10 +115,10 @@ def init_from(model: torch.nn.Module, path: str | Path, config: StereoConfig, de
     return list(ckpt.get("folded_bn") or [])
 
 
-def _sequence_loss(init_disp, preds, gt, valid, max_disp):
+def _sequence_loss(init_disp, preds, gt, valid, max_disp, weight=None):
     from spacepose.models.stereo_loss import sequence_loss
 
-    return sequence_loss(init_disp, preds, gt, valid, max_disp=max_disp)
+    return sequence_loss(init_disp, preds, gt, valid, max_disp=max_disp, weight=weight)
 
 
 def _to_float(metrics: dict[str, Any]) -> dict[str, float]:
@@ -202,7 +204,10 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         left, right = batch["left"].to(device), batch["right"].to(device)
         gt, valid = batch["disparity"].to(device), batch["valid"].to(device)
         init_disp, preds = net(left, right, iters=cfg.iters)
-        loss, metrics = _sequence_loss(init_disp, preds, gt, valid, stereo_cfg.max_disp)
+        weight = None
+        if cfg.target_weight != 1.0:
+            weight = 1.0 + (cfg.target_weight - 1.0) * batch["target"].to(device)
+        loss, metrics = _sequence_loss(init_disp, preds, gt, valid, stereo_cfg.max_disp, weight)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)

@@ -41,3 +41,24 @@ def test_shape_mismatch_raises():
     gt = torch.zeros(1, 1, 2, 2)
     with pytest.raises(ShapeError):
         sequence_loss(gt, [torch.zeros(1, 1, 2, 3)], gt, gt.bool(), 10.0)
+
+
+def test_weighted_loss_is_a_weighted_mean_and_metrics_stay_unweighted():
+    torch.manual_seed(0)
+    gt = torch.rand(2, 1, 8, 8) * 20
+    preds = [gt + torch.randn_like(gt) for _ in range(3)]
+    init = gt + 2 * torch.randn_like(gt)
+    valid = torch.rand(2, 1, 8, 8) > 0.2
+    plain, m_plain = sequence_loss(init, preds, gt, valid, max_disp=64)
+    ones, m_ones = sequence_loss(init, preds, gt, valid, max_disp=64, weight=torch.ones_like(gt))
+    assert torch.allclose(plain, ones) and m_plain == m_ones
+    # all weight on a subset == the plain loss over that subset; metrics still over every valid pixel
+    subset = torch.zeros_like(gt, dtype=torch.bool)
+    subset[:, :, :4] = True
+    only, m_only = sequence_loss(init, preds, gt, valid, max_disp=64, weight=subset.float())
+    ref, _ = sequence_loss(init, preds, gt, valid & subset, max_disp=64)
+    assert torch.allclose(only, ref) and m_only == m_plain
+    heavier, _ = sequence_loss(init, preds, gt, valid, max_disp=64, weight=1.0 + 3.0 * subset.float())
+    assert min(float(ref), float(plain)) - 1e-6 <= float(heavier) <= max(float(ref), float(plain)) + 1e-6
+    with pytest.raises(ShapeError):
+        sequence_loss(init, preds, gt, valid, max_disp=64, weight=torch.ones(2, 1, 4, 4))

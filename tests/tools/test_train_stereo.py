@@ -105,3 +105,22 @@ def _regimes(ds):
     from spacepose.tools.stereo_data import read_labels
 
     return [r.regime for r in read_labels(ds, "train")]
+
+
+def test_target_weight_reaches_the_loss(synthetic_dataset, tmp_path, monkeypatch):
+    import dataclasses
+
+    from spacepose.tools import train_stereo as ts
+
+    seen = []
+    real = ts._sequence_loss
+
+    def spy(init_disp, preds, gt, valid, max_disp, weight=None):
+        seen.append(weight)
+        return real(init_disp, preds, gt, valid, max_disp, weight)
+
+    monkeypatch.setattr(ts, "_sequence_loss", spy)
+    cfg = dataclasses.replace(_cfg(synthetic_dataset, tmp_path / "tw", 1), target_weight=4.0, val_every=100)
+    train_stereo(cfg)
+    assert len(seen) == 1 and seen[0] is not None
+    assert set(torch.unique(seen[0]).tolist()) <= {1.0, 4.0} and float(seen[0].max()) == 4.0
