@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
                           cycles=args.cycles, augment=not args.no_augment, ckpt_every=args.ckpt_every,
                           val_every=args.val_every, val_samples=args.val_samples, log_every=args.log_every,
                           workers=args.workers, threads=args.threads, seed=args.seed, limit=args.limit,
-                          init=str(args.init) if args.init else None)
+                          init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s)
     if args.init and args.resume:
         raise SystemExit("--init starts a new run; --resume continues one: give one of them")
     summary = train_pose(cfg, resume=args.resume)

@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
                       ckpt_every=args.ckpt_every, val_every=args.val_every, val_samples=args.val_samples,
                       log_every=args.log_every, workers=args.workers, threads=args.threads, seed=args.seed,
                       limit=args.limit, oversample=dict(args.oversample),
-                      init=str(args.init) if args.init else None, target_weight=args.target_weight)
+                      init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s, target_weight=args.target_weight)
     if not args.target_weight > 0:
         raise SystemExit("--target-weight must be > 0")
     if args.init and args.resume:

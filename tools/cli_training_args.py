@@ -28,3 +28,5 @@ def add_loop_arguments(parser: argparse.ArgumentParser, *, workers: int) -> None
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--limit", type=int, default=None, help="use only the first N training frames")
     parser.add_argument("--resume", action="store_true", help="continue OUT/last.pt")
+    parser.add_argument("--time-limit-s", type=float, default=None,
+                        help="also stop (checkpoint saved, resumable) after this many seconds of training")

@@ -67,6 +67,8 @@ class TrainPoseConfig:
     radius_m: float | None = None          # target radius for the depth window (default: mesh)
     #: warm start: model weights from this checkpoint, fresh optimiser and schedule (fine-tuning)
     init: str | None = None
+    #: stop after this many seconds of training in one call (None: run all ``steps``)
+    time_limit_s: float | None = None
 
     def net_config(self) -> PoseNetConfig:
         overrides = {k: tuple(v) if isinstance(v, list) else v for k, v in self.net.items()}
@@ -239,5 +241,5 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
     step, last = tc.run_steps(step=step, steps=cfg.steps, batch=cfg.batch, workers=cfg.workers, train_set=train_set,
                               sampler=sampler, train_step=train_step, validate=validate_fn, save=save,
                               log_file=log_file, ctx=ctx, log_every=cfg.log_every, val_every=cfg.val_every,
-                              ckpt_every=cfg.ckpt_every)
+                              ckpt_every=cfg.ckpt_every, time_limit_s=cfg.time_limit_s)
     return {"step": step, "checkpoint": str(ckpt_path), **last}

@@ -66,6 +66,8 @@ class TrainConfig:
     oversample: dict[str, int] = field(default_factory=dict)
     #: warm start: model weights from this checkpoint, fresh optimiser and schedule (fine-tuning)
     init: str | None = None
+    #: stop after this many seconds of training in one call (None: run all ``steps``)
+    time_limit_s: float | None = None
     #: loss weight of target pixels relative to background pixels (1: plain mean over valid pixels)
     target_weight: float = 1.0
     stereo: dict[str, Any] = field(default_factory=dict)  # StereoConfig overrides
@@ -219,5 +221,5 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     step, last = tc.run_steps(step=step, steps=cfg.steps, batch=cfg.batch, workers=cfg.workers, train_set=train_set,
                               sampler=sampler, train_step=train_step, validate=validate_fn, save=save,
                               log_file=log_file, ctx=ctx, log_every=cfg.log_every, val_every=cfg.val_every,
-                              ckpt_every=cfg.ckpt_every)
+                              ckpt_every=cfg.ckpt_every, time_limit_s=cfg.time_limit_s)
     return {"step": step, "checkpoint": str(ckpt_path), **last}

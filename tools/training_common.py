@@ -205,17 +205,29 @@ def finish_run(log_file: JsonlLog, ctx: RunContext) -> None:
 def run_steps(*, step: int, steps: int, batch: int, workers: int, train_set: Any, sampler: EpochSampler,
               train_step: Callable[[dict[str, Any]], tuple[dict[str, float], float, float]],
               validate: Callable[[], dict[str, float]] | None, save: Callable[[int], None], log_file: JsonlLog,
-              ctx: RunContext, log_every: int, val_every: int, ckpt_every: int) -> tuple[int, dict[str, float]]:
+              ctx: RunContext, log_every: int, val_every: int, ckpt_every: int,
+              time_limit_s: float | None = None) -> tuple[int, dict[str, float]]:
     """The epoch/batch loop both trainers share; returns (final step, last logged values).
 
     ``train_step(batch) -> (values, grad_norm, lr)`` does one optimiser step. Every ``log_every``
     steps a JSONL entry is written; every ``val_every`` steps ``validate()`` runs on rank 0; every
     ``ckpt_every`` steps and at exit (also on error or interrupt) ``save(step)`` is called, then the
     run is finished. Resuming mid-epoch skips the samples already seen (:class:`EpochSampler`).
+    With ``time_limit_s`` the loop also ends (checkpoint saved, resumable) once that many seconds of
+    this call have passed; under DDP the ranks agree on the stop (rank 0's clock decides).
     """
     batches_per_epoch = max(sampler.per_rank() // batch, 1)
     last: dict[str, float] = {}
-    t_last = time.perf_counter()
+    t_start = t_last = time.perf_counter()
+
+    def out_of_time() -> bool:
+        if time_limit_s is None:
+            return False
+        over = torch.tensor([float(time.perf_counter() - t_start >= time_limit_s)], device=ctx.device)
+        if ctx.world > 1 and dist.is_initialized():
+            dist.broadcast(over, src=0)
+        return bool(over.item())
+
     try:
         while step < steps:
             epoch, pos = divmod(step, batches_per_epoch)
@@ -239,6 +251,10 @@ def run_steps(*, step: int, steps: int, batch: int, workers: int, train_set: Any
                 if step % ckpt_every == 0:
                     save(step)
                 if step >= steps:
+                    break
+                if out_of_time():
+                    log.info("time limit of %.0f s reached at step %d", time_limit_s, step)
+                    steps = step
                     break
     finally:
         save(step)

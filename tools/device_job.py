@@ -1,0 +1,157 @@
+"""One self-contained training job for a lent accelerator machine: render there, fine-tune, export back.
+
+The device machine receives the working tree (at most 64 MiB: the 7.9 GB dataset cannot travel) and
+has torch but neither trimesh nor embreex; it returns at most 8 files of 16 MiB. So the job renders its
+own data there on the machine's CPU cores (the two packages travel as wheels), rebuilds training
+checkpoints from the shipped graphs (``spacepose recover-checkpoint``), fine-tunes the stereo and pose
+networks at once (two processes sharing the GPU, each under a wall-clock limit), exports both graphs
+with their parity checks, and writes them with the logs into ``--out``::
+
+    python -m spacepose.tools.device_job --work /tmp/job --out "$OUT" --frames 3000 \\
+        --stereo-steps 20000 --pose-steps 20000 --time-limit-s 360 --render-workers 14
+
+What comes back (``--out``): ``stereo.onnx``, ``pose.onnx``, ``stereo_weights.pt`` and
+``pose_weights.pt`` (model-only state dicts, small enough to come back; ``--init`` takes them after
+``spacepose recover-checkpoint`` or directly), ``stereo_log.jsonl``, ``pose_log.jsonl`` and
+``job.json`` (commands, timings, final losses). Nothing is written outside ``--work`` and ``--out``.
+The same job runs on a CPU with small numbers (the test does), which is how it is checked before a
+machine is lent. The model card's "training on a lent accelerator" section has the full ``run`` call.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Sequence
+
+log = logging.getLogger(__name__)
+
+__all__ = ["main", "job_commands"]
+
+_DEFAULT_BUNDLE = Path(__file__).resolve().parents[1] / "runtime" / "bundles" / "default"
+
+
+def _spacepose(*args: str) -> list[str]:
+    return [sys.executable, "-m", "spacepose.cli", *args]
+
+
+def job_commands(args: argparse.Namespace, work: Path) -> dict[str, list[list[str]]]:
+    """The commands of each phase (render, recover, train — run concurrently — and export)."""
+    data = work / "data"
+    bundle = Path(args.bundle)
+    common = ["--threads", str(args.threads), "--ckpt-every", "500", "--val-every", str(args.val_every),
+              "--time-limit-s", str(args.time_limit_s), "--seed", str(args.seed)]
+    stereo = _spacepose("train-stereo", str(data), "--out", str(work / "stereo"), "--steps", str(args.stereo_steps),
+                        "--batch", str(args.stereo_batch), "--train-crop", "160x160", "--init",
+                        str(work / "init_stereo.pt"), "--lr", str(args.stereo_lr), "--workers",
+                        str(args.loader_workers), "--target-weight", str(args.target_weight), "--oversample",
+                        "mixed=3", "penumbra=2", *common)
+    pose = _spacepose("train-pose", str(data), "--out", str(work / "pose"), "--steps", str(args.pose_steps),
+                      "--batch", str(args.pose_batch), "--depth-source", "gt_noisy", "--init",
+                      str(work / "init_pose.pt"), "--lr-min", "1e-5", "--lr-max", str(args.pose_lr_max),
+                      "--cycles", "3", "--workers", str(args.loader_workers), *common)
+    return {
+        "render": [_spacepose("render", str(data), "--target", "tdrs", "--count", str(args.frames), "--size",
+                              args.size, "--seed", str(args.data_seed), "--workers", str(args.render_workers))],
+        "recover": [_spacepose("recover-checkpoint", str(bundle / "stereo.onnx"), "--out",
+                               str(work / "init_stereo.pt"), "--force"),
+                    _spacepose("recover-checkpoint", str(bundle / "pose.onnx"), "--out",
+                               str(work / "init_pose.pt"), "--force")],
+        "train": [stereo, pose],
+        "export": [_spacepose("export-stereo", str(work / "stereo" / "last.pt"), "--out",
+                              str(work / "export" / "stereo.onnx"), "--no-manifest", "--force"),
+                   _spacepose("export-pose", str(work / "pose" / "last.pt"), "--out",
+                              str(work / "export" / "pose.onnx"), "--force")],
+    }
+
+
+def _run_all(commands: list[list[str]], logs: list[Path]) -> list[int]:
+    """Start the commands at once, each writing to its log; wait for all; their exit codes."""
+    procs = []
+    for cmd, path in zip(commands, logs):
+        handle = path.open("w")
+        procs.append((subprocess.Popen(cmd, stdout=handle, stderr=subprocess.STDOUT), handle))
+    codes = []
+    for proc, handle in procs:
+        codes.append(proc.wait())
+        handle.close()
+    return codes
+
+
+def _weights_only(ckpt_path: Path, out: Path) -> None:
+    import torch
+
+    ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=False)
+    keep = {k: v for k, v in ckpt.items() if k not in ("optimizer", "scheduler", "rng")}
+    torch.save(keep, out)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m spacepose.tools.device_job", description=__doc__.split("\n")[0])
+    p.add_argument("--work", type=Path, required=True, help="scratch folder (data, runs); created")
+    p.add_argument("--out", type=Path, required=True, help="folder for what comes back (graphs, weights, logs)")
+    p.add_argument("--bundle", default=str(_DEFAULT_BUNDLE), help="bundle whose graphs the fine-tuning starts from")
+    p.add_argument("--frames", type=int, default=3000)
+    p.add_argument("--size", default="640x480")
+    p.add_argument("--data-seed", type=int, default=11, help="dataset seed (not the shipped data's 1: new frames)")
+    p.add_argument("--render-workers", type=int, default=14)
+    p.add_argument("--loader-workers", type=int, default=6, help="DataLoader workers per training process")
+    p.add_argument("--threads", type=int, default=0, help="torch threads per training process (0: default)")
+    p.add_argument("--stereo-steps", type=int, default=20000)
+    p.add_argument("--pose-steps", type=int, default=20000)
+    p.add_argument("--stereo-batch", type=int, default=16)
+    p.add_argument("--pose-batch", type=int, default=16)
+    p.add_argument("--stereo-lr", type=float, default=2e-4)
+    p.add_argument("--pose-lr-max", type=float, default=1e-3)
+    p.add_argument("--target-weight", type=float, default=4.0)
+    p.add_argument("--time-limit-s", type=float, default=360.0, help="wall-clock limit of each training process")
+    p.add_argument("--val-every", type=int, default=1000)
+    p.add_argument("--seed", type=int, default=0)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    args = build_parser().parse_args(argv)
+    work, out = args.work, args.out
+    work.mkdir(parents=True, exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
+    (work / "export").mkdir(exist_ok=True)
+    phases = job_commands(args, work)
+    report: dict = {"args": {k: str(v) for k, v in vars(args).items()}, "phases": {}}
+    ok = True
+    for name, commands in phases.items():
+        t0 = time.perf_counter()
+        logs = [work / f"{name}_{i}.log" for i in range(len(commands))]
+        codes = _run_all(commands, logs) if name == "train" else [
+            _run_all([cmd], [path])[0] for cmd, path in zip(commands, logs)]
+        seconds = time.perf_counter() - t0
+        tails = [path.read_text(errors="replace")[-1500:] for path in logs]
+        report["phases"][name] = {"seconds": round(seconds, 1), "exit_codes": codes,
+                                  "commands": [" ".join(c) for c in commands], "log_tails": tails}
+        log.info("%s: %.0f s, exit codes %s", name, seconds, codes)
+        if any(codes):
+            ok = False
+            break
+    for kind in ("stereo", "pose"):
+        run = work / kind
+        if (run / "log.jsonl").is_file():
+            shutil.copyfile(run / "log.jsonl", out / f"{kind}_log.jsonl")
+        if (run / "last.pt").is_file():
+            _weights_only(run / "last.pt", out / f"{kind}_weights.pt")
+        graph = work / "export" / f"{kind}.onnx"
+        if graph.is_file():
+            shutil.copyfile(graph, out / f"{kind}.onnx")
+    report["ok"] = ok
+    (out / "job.json").write_text(json.dumps(report, indent=2))
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
