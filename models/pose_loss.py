@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
-__all__ = ["PoseLossConfig", "focal_loss", "offset_l1", "keypoint_offset_targets", "centre_offset_targets", "pose_loss"]
+__all__ = ["PoseLossConfig", "focal_loss", "offset_l1", "offset_l1_min", "flip_matrix", "flipped_keypoint_targets",
+           "keypoint_offset_targets", "centre_offset_targets", "pose_loss"]
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,40 @@ def offset_l1(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> t
     return torch.sum(per_point * w) / torch.clamp(torch.sum(w), min=1.0)
 
 
+def offset_l1_min(pred: torch.Tensor, targets: list[torch.Tensor], mask: torch.Tensor) -> torch.Tensor:
+    """:func:`offset_l1` against the best of several target sets, chosen per sample.
+
+    ``pred`` and each of ``targets`` (B, M, N, 3); ``mask`` (B, N). For every sample the target set
+    with the smallest summed L1 is kept; the result is normalised like :func:`offset_l1` (by all masked
+    points of the batch), so a single target set gives exactly :func:`offset_l1`.
+    """
+    w = mask.to(pred.dtype)
+    per_sample = torch.stack([(torch.abs(pred - t).sum(dim=-1).sum(dim=1) * w).sum(dim=1) for t in targets])
+    return per_sample.min(dim=0).values.sum() / torch.clamp(torch.sum(w), min=1.0)
+
+
+def flip_matrix(axis: str) -> torch.Tensor:
+    """(3, 3) rotation by 180 degrees about the body axis ``"x"``, ``"y"`` or ``"z"``."""
+    signs = {"x": (1.0, -1.0, -1.0), "y": (-1.0, 1.0, -1.0), "z": (-1.0, -1.0, 1.0)}
+    if axis not in signs:
+        raise ValueError(f"flip axis must be x, y or z, got {axis!r}")
+    return torch.diag(torch.tensor(signs[axis]))
+
+
+def flipped_keypoint_targets(kp_targets: torch.Tensor, R: torch.Tensor, keypoints: torch.Tensor,
+                             centre: torch.Tensor, axis: str) -> torch.Tensor:
+    """Keypoint offset targets of the pose turned 180° about body ``axis`` through the centre.
+
+    ``kp_targets`` (B, M, N, 3) of the true pose, ``R`` (B, 3, 3), ``keypoints`` (M, 3) and ``centre``
+    (3,) in the object frame. The flipped pose maps keypoint k to ``R (c + S (k - c)) + t``, so the
+    targets move by ``R (S - I)(k - c)``, the same for every point.
+    """
+    S = flip_matrix(axis).to(kp_targets.dtype)
+    rel = (keypoints - centre).to(kp_targets.dtype)                       # (M, 3)
+    moved = torch.einsum("bij,mj->bmi", R.to(kp_targets.dtype), rel @ S.T - rel)
+    return kp_targets + moved.unsqueeze(2)
+
+
 def keypoint_offset_targets(points: torch.Tensor, keypoints: torch.Tensor) -> torch.Tensor:
     """``keypoint - point``: points (B, N, 3), keypoints (B, M, 3) camera frame -> (B, M, N, 3)."""
     return keypoints.unsqueeze(2) - points.unsqueeze(1)
@@ -68,16 +103,22 @@ def centre_offset_targets(points: torch.Tensor, centre: torch.Tensor) -> torch.T
 
 def pose_loss(seg_logits: torch.Tensor, kp_offsets: torch.Tensor, ctr_offsets: torch.Tensor,
               labels: torch.Tensor, kp_targets: torch.Tensor, ctr_targets: torch.Tensor,
-              cfg: PoseLossConfig | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+              cfg: PoseLossConfig | None = None,
+              kp_targets_alt: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Eq. 26: ``K1 L_keypoints + K2 L_semantic + K3 L_center``; returns (total, parts).
 
     ``labels`` (B, N) int64 with 0 = background; offsets are supervised where ``labels > 0``.
+    ``kp_targets_alt`` (B, M, N, 3): the keypoint targets of an equally plausible pose (a symmetry of
+    the target, :func:`flipped_keypoint_targets`); each sample is then scored against the nearer of
+    the two sets (:func:`offset_l1_min`). Not the paper's loss: a training option for near-symmetric targets.
     """
     cfg = cfg or PoseLossConfig()
     mask = labels > 0
     s = cfg.offset_scale
+    kp_term = (offset_l1(kp_offsets / s, kp_targets / s, mask) if kp_targets_alt is None else
+               offset_l1_min(kp_offsets / s, [kp_targets / s, kp_targets_alt / s], mask))
     parts = {
-        "keypoints": offset_l1(kp_offsets / s, kp_targets / s, mask),
+        "keypoints": kp_term,
         "semantic": focal_loss(seg_logits, labels, cfg.gamma, cfg.alpha),
         "center": offset_l1(ctr_offsets / s, ctr_targets / s, mask),
     }

@@ -42,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lr-max", type=float, default=1e-3)
     parser.add_argument("--cycles", type=int, default=3)
     parser.add_argument("--no-augment", action="store_true", help="no photometric augmentation")
+    parser.add_argument("--symmetric-flip", choices=("x", "y", "z"), default=None,
+                        help="score keypoints against the nearer of the true pose and the pose flipped 180° about "
+                             "this body axis (not the paper's loss; for a near-symmetric target)")
     parser.add_argument("--init", type=Path, default=None,
                         help="fine-tune: start from this checkpoint's weights (e.g. one from spacepose "
                              "recover-checkpoint) with a fresh optimiser and schedule")
@@ -65,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
                           cycles=args.cycles, augment=not args.no_augment, ckpt_every=args.ckpt_every,
                           val_every=args.val_every, val_samples=args.val_samples, log_every=args.log_every,
                           workers=args.workers, threads=args.threads, seed=args.seed, limit=args.limit,
-                          init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s)
+                          init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s,
+                          symmetric_flip=args.symmetric_flip)
     if args.init and args.resume:
         raise SystemExit("--init starts a new run; --resume continues one: give one of them")
     summary = train_pose(cfg, resume=args.resume)

@@ -27,7 +27,7 @@ import torch
 
 from spacepose.errors import DatasetError, SpaceposeError
 from spacepose.models.pose_config import PoseNetConfig
-from spacepose.models.pose_loss import PoseLossConfig, pose_loss
+from spacepose.models.pose_loss import PoseLossConfig, flip_matrix, flipped_keypoint_targets, pose_loss
 from spacepose.tools import training_common as tc
 from spacepose.tools.pose_data import PoseDataConfig, PoseDataset
 from spacepose.tools.training_common import CHECKPOINT_NAME, EpochSampler, git_commit
@@ -69,6 +69,10 @@ class TrainPoseConfig:
     init: str | None = None
     #: stop after this many seconds of training in one call (None: run all ``steps``)
     time_limit_s: float | None = None
+    #: score keypoints against the nearer of the true pose and the pose flipped 180° about this body
+    #: axis ("x", "y", "z"; None: the paper's loss). For a near-symmetric target, whose plain L1
+    #: optimum without the flip cue is the flat midpoint (``python -m spacepose.tools.keypoint_floor``).
+    symmetric_flip: str | None = None
 
     def net_config(self) -> PoseNetConfig:
         overrides = {k: tuple(v) if isinstance(v, list) else v for k, v in self.net.items()}
@@ -124,15 +128,17 @@ def _forward(net: torch.nn.Module, names: list[str], batch: dict[str, Any], devi
 
 @torch.no_grad()
 def validate_pose(model: torch.nn.Module, dataset: PoseDataset, device: torch.device,
-                  loss_cfg: PoseLossConfig) -> dict[str, float]:
-    """Loss, segmentation accuracy and voted-pose errors (median e_t, e_R; valid share) on ``dataset``."""
+                  loss_cfg: PoseLossConfig, symmetric_flip: str | None = None) -> dict[str, float]:
+    """Loss, segmentation accuracy and voted-pose errors (median e_t, e_R; valid share) on ``dataset``;
+    with ``symmetric_flip`` also the median e_R to the nearer of the true and the flipped pose."""
     from spacepose.bundle import VotingConfig
     from spacepose.metrics import rotation_error_deg, translation_error
     from spacepose.pose_stage import solve_pose
 
     model.eval()
     names = model.input_names
-    losses, accs, e_t, e_r, n_valid = [], [], [], [], 0
+    losses, accs, e_t, e_r, e_r_sym, n_valid = [], [], [], [], [], 0
+    flip = None if symmetric_flip is None else flip_matrix(symmetric_flip).numpy()
     for i in range(len(dataset)):
         s = dataset[i]
         batch = {k: v[None] if isinstance(v, torch.Tensor) else v for k, v in s.items()}
@@ -149,12 +155,17 @@ def validate_pose(model: torch.nn.Module, dataset: PoseDataset, device: torch.de
             n_valid += 1
             e_t.append(translation_error(s["t"].numpy(), stage.t))
             e_r.append(rotation_error_deg(s["R"].numpy(), stage.R))
+            if flip is not None:
+                e_r_sym.append(min(e_r[-1], rotation_error_deg(s["R"].numpy() @ flip, stage.R)))
     model.train()
     nan = float("nan")
-    return {"val_loss": float(np.mean(losses)), "val_seg_acc": float(np.mean(accs)),
-            "val_valid": n_valid / max(len(dataset), 1),
-            "val_e_t_median": float(np.median(e_t)) if e_t else nan,
-            "val_e_R_median": float(np.median(e_r)) if e_r else nan}
+    out = {"val_loss": float(np.mean(losses)), "val_seg_acc": float(np.mean(accs)),
+           "val_valid": n_valid / max(len(dataset), 1),
+           "val_e_t_median": float(np.median(e_t)) if e_t else nan,
+           "val_e_R_median": float(np.median(e_r)) if e_r else nan}
+    if flip is not None:
+        out["val_e_R_flip_median"] = float(np.median(e_r_sym)) if e_r_sym else nan
+    return out
 
 
 def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
@@ -187,8 +198,8 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
     if resume:
         ckpt = load_checkpoint(ckpt_path, map_location=str(device))
         folded = list(ckpt.get("folded_bn") or [])
-        step = tc.resume_training(ckpt, cfg, ("preset", "net", "fusion", "attention", "batch", "depth_source"), model,
-                                  optimizer, scheduler)
+        keys = ("preset", "net", "fusion", "attention", "batch", "depth_source", "symmetric_flip")
+        step = tc.resume_training(ckpt, cfg, keys, model, optimizer, scheduler)
         log.info("resumed %s at step %d", ckpt_path, step)
     elif cfg.init:
         folded = init_from(model, cfg.init, net_cfg)
@@ -223,10 +234,16 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
                                 "baseline_m": train_set.baseline_m},
                         "commit": git_commit(), "dataset": dataset_doc, "folded_bn": folded}, ckpt_path)
 
+    kp_obj = torch.as_tensor(train_set.keypoints, dtype=torch.float32, device=device)
+    centre_obj = torch.as_tensor(train_set.centre, dtype=torch.float32, device=device)
+
     def train_step(batch: dict[str, Any]) -> tuple[dict[str, float], float, float]:
         seg, kp, ctr = _forward(net, names, batch, device)
-        loss, parts = pose_loss(seg, kp, ctr, batch["labels"].to(device), batch["kp_targets"].to(device),
-                                batch["ctr_targets"].to(device), loss_cfg)
+        kp_targets = batch["kp_targets"].to(device)
+        alt = None if cfg.symmetric_flip is None else flipped_keypoint_targets(
+            kp_targets, batch["R"].to(device), kp_obj, centre_obj, cfg.symmetric_flip)
+        loss, parts = pose_loss(seg, kp, ctr, batch["labels"].to(device), kp_targets,
+                                batch["ctr_targets"].to(device), loss_cfg, kp_targets_alt=alt)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
@@ -237,7 +254,7 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
                   "target_share": float((batch["labels"] > 0).float().mean())}
         return values, float(grad_norm), lr
 
-    validate_fn = None if val_set is None else (lambda: validate_pose(model, val_set, device, loss_cfg))
+    validate_fn = None if val_set is None else (lambda: validate_pose(model, val_set, device, loss_cfg, cfg.symmetric_flip))
     step, last = tc.run_steps(step=step, steps=cfg.steps, batch=cfg.batch, workers=cfg.workers, train_set=train_set,
                               sampler=sampler, train_step=train_step, validate=validate_fn, save=save,
                               log_file=log_file, ctx=ctx, log_every=cfg.log_every, val_every=cfg.val_every,

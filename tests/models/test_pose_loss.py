@@ -90,3 +90,49 @@ def test_loss_falls_when_overfitting_one_sample():
         losses.append(total.item())
     assert np.isfinite(losses).all()
     assert losses[-1] < 0.5 * losses[0]
+
+
+def _random_rotation(gen):
+    q, _ = torch.linalg.qr(torch.randn(3, 3, generator=gen, dtype=torch.float64))
+    return q * torch.sign(torch.det(q))
+
+
+def test_flipped_targets_are_those_of_the_flipped_pose():
+    from spacepose.models.pose_loss import flip_matrix, flipped_keypoint_targets, keypoint_offset_targets
+
+    gen = torch.Generator().manual_seed(0)
+    kp = torch.randn(8, 3, generator=gen, dtype=torch.float64)
+    c = torch.randn(3, generator=gen, dtype=torch.float64)
+    R = torch.stack([_random_rotation(gen) for _ in range(2)])
+    t = torch.randn(2, 3, generator=gen, dtype=torch.float64) + torch.tensor([0.0, 0.0, 20.0], dtype=torch.float64)
+    pts = torch.randn(2, 50, 3, generator=gen, dtype=torch.float64) + t[:, None]
+    true = keypoint_offset_targets(pts, kp @ R.transpose(1, 2) + t[:, None])
+    for axis in "xyz":
+        S = flip_matrix(axis).double()
+        assert torch.allclose(S @ S, torch.eye(3, dtype=torch.float64)) and torch.det(S) == 1.0
+        R_f = R @ S                                   # the pose turned 180° about body `axis` through c
+        t_f = t + torch.einsum("bij,j->bi", R, c - S @ c)
+        want = keypoint_offset_targets(pts, kp @ R_f.transpose(1, 2) + t_f[:, None])
+        got = flipped_keypoint_targets(true, R, kp, c, axis)
+        assert torch.allclose(got, want, atol=1e-9)
+    with pytest.raises(ValueError):
+        flip_matrix("w")
+
+
+def test_min_over_target_sets_is_chosen_per_sample():
+    from spacepose.models.pose_loss import offset_l1, offset_l1_min
+
+    gen = torch.Generator().manual_seed(1)
+    a = torch.randn(2, 4, 30, 3, generator=gen)
+    b = a + 5.0
+    mask = torch.rand(2, 30, generator=gen) > 0.3
+    assert torch.allclose(offset_l1_min(a + 0.1, [a], mask), offset_l1(a + 0.1, a, mask))
+    pred = torch.stack([a[0], b[1]])                  # sample 0 matches set a, sample 1 set b
+    assert float(offset_l1_min(pred, [a, b], mask)) == 0.0
+    assert float(offset_l1(pred, a, mask)) > 0.0
+    # pose_loss with the alternative set: the keypoint term is the per-sample min
+    seg = torch.zeros(2, 30, 2)
+    labels = mask.long()
+    ctr = torch.zeros(2, 30, 3)
+    _, parts = pose_loss(seg, pred, ctr, labels, a, ctr, kp_targets_alt=b)
+    assert float(parts["keypoints"]) == 0.0

@@ -104,3 +104,41 @@ def test_init_from_a_shipped_graph_fine_tunes_with_frozen_batchnorm(tmp_path_fac
     bad = TrainPoseConfig(**{**cfg.__dict__, "out": str(tmp_path / "bad"), "net": {**cfg.net, "head_width": 8}})
     with pytest.raises(SpaceposeError, match="differs"):
         train_pose(bad)
+
+
+def test_symmetric_flip_training_and_its_validation_metric(tmp_path_factory, tmp_path):
+    from spacepose.tools.pose_data import PoseDataConfig, PoseDataset
+    from spacepose.tools.train_pose import validate_pose
+    from spacepose.models.pose_loss import PoseLossConfig
+
+    root = pose_dataset(tmp_path_factory)
+    out = tmp_path / "sym"
+    ckpt_path = train_tiny(root, out, steps=2, symmetric_flip="z")
+    doc = json.loads((out / "config.json").read_text())
+    assert doc["train"]["symmetric_flip"] == "z"
+    cfg = TrainPoseConfig(**{**doc["train"], "steps": 3, "symmetric_flip": None})
+    with pytest.raises(SpaceposeError, match="symmetric_flip"):
+        train_pose(cfg, resume=True)
+    model, net_cfg = model_from_checkpoint(load_checkpoint(ckpt_path))
+    val = PoseDataset(root, "test", net_cfg.input_spec(), PoseDataConfig(depth_source="gt_noisy", augment=False),
+                      limit=1, deterministic=True, radius_m=2.6)
+    metrics = validate_pose(model, val, torch.device("cpu"), PoseLossConfig(offset_scale=net_cfg.xyz_scale), "z")
+    assert "val_e_R_flip_median" in metrics
+    assert "val_e_R_flip_median" not in validate_pose(model, val, torch.device("cpu"),
+                                                      PoseLossConfig(offset_scale=net_cfg.xyz_scale))
+
+
+def test_keypoint_floor_reference_predictors(tmp_path_factory, tmp_path):
+    import numpy as np
+
+    from spacepose.tools.keypoint_floor import _kp_l1, keypoint_floor
+
+    root = pose_dataset(tmp_path_factory)
+    ckpt = train_tiny(root, tmp_path / "kf", steps=1)
+    result = keypoint_floor(root, checkpoint=ckpt, frames=3)
+    assert set(result) == {"centre_only", "flip_x", "flip_y", "flip_z", "network", "frames"}
+    assert result["frames"] >= 1 and all(np.isfinite(v) and v > 0 for v in result.values())
+    target = np.random.default_rng(0).normal(size=(8, 20, 3))
+    mask = np.ones(20, dtype=bool)
+    assert _kp_l1(target, target, mask, 2.5) == 0.0
+    assert _kp_l1(target + 1.0, target, mask, 2.5) == pytest.approx(8 * 3 / 2.5)

@@ -124,3 +124,14 @@ def test_target_weight_reaches_the_loss(synthetic_dataset, tmp_path, monkeypatch
     train_stereo(cfg)
     assert len(seen) == 1 and seen[0] is not None
     assert set(torch.unique(seen[0]).tolist()) <= {1.0, 4.0} and float(seen[0].max()) == 4.0
+
+
+def test_time_limit_stops_with_a_resumable_checkpoint(synthetic_dataset, tmp_path):
+    import dataclasses
+
+    out = tmp_path / "tl"
+    cfg = dataclasses.replace(_cfg(synthetic_dataset, out, 5), time_limit_s=0.0, val_every=100, ckpt_every=100)
+    summary = train_stereo(cfg)
+    assert summary["step"] == 1 and load_checkpoint(out / "last.pt")["step"] == 1
+    summary = train_stereo(dataclasses.replace(cfg, time_limit_s=None), resume=True)
+    assert summary["step"] == 5
