@@ -152,6 +152,13 @@ class VotingConfig:
     #: wrong stereo disparities. -1 disables the check; a view with too few textured patches to
     #: score is not rejected by it.
     min_photo_consistency: float = -1.0
+    #: body axis ("x", "y" or "z") of the target's near-symmetry: the fitted pose and its 180° flip
+    #: about it are both scored against the stereo points and the better kept (:mod:`spacepose.flip`);
+    #: "" disables this (a pose graph trained with the paper's loss, or a target without one)
+    flip_axis: str = ""
+    #: least surface-fitness gap between the kept pose and its flip; below it the frame is
+    #: ``weak_votes`` (the points do not say which of the two it is)
+    min_flip_margin: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -427,8 +434,12 @@ def _parse_voting(section: Any) -> VotingConfig:
             value = _integer(value, where)
         else:
             value = _number(value, where, positive=name not in ("min_confidence", "min_surface_fitness",
-                                                                     "min_photo_consistency"))
+                                                                     "min_photo_consistency", "min_flip_margin"))
         values[name] = value
+    if values["flip_axis"] not in ("", "x", "y", "z"):
+        raise BundleError(f"bundle.json: voting.flip_axis must be '', 'x', 'y' or 'z', got {values['flip_axis']!r}")
+    if not 0.0 <= values["min_flip_margin"] < 1.0:
+        raise BundleError(f"bundle.json: voting.min_flip_margin must be in [0, 1), got {values['min_flip_margin']!r}")
     if values["kernel"] not in ("flat", "gaussian"):
         raise BundleError(f"bundle.json: voting.kernel must be 'flat' or 'gaussian', got {values['kernel']!r}")
     if values["min_keypoints"] < 3:

@@ -37,6 +37,7 @@ import numpy as np
 from . import roi
 from .bundle import ModelBundle, load_bundle
 from .errors import ShapeError
+from .flip import resolve_flip
 from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
@@ -71,6 +72,9 @@ class PoseResult:
         n_points: target points the pose was voted from (centre-cluster inliers; 0 if none).
         roi: left-image box ``(x0, y0, x1, y1)`` of the stereo fine pass, or ``None``.
         detail: a human-readable reason for an invalid result ("" when valid).
+        flip_margin: with the bundle's ``voting.flip_axis``, how much more of the stereo points the
+            kept pose holds than its 180° flip (surface fitness gap, :mod:`spacepose.flip`); NaN when
+            that check did not run. Not part of the JSON line.
     """
 
     R: np.ndarray
@@ -84,6 +88,7 @@ class PoseResult:
     n_points: int = 0
     roi: tuple[int, int, int, int] | None = None
     detail: str = ""
+    flip_margin: float = float("nan")
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -326,7 +331,9 @@ class PoseEstimator:
                             confidence=float(conf), timings_ms=dict(timer.timings_ms),
                             network_ms=timer.network_ms,
                             n_points=0 if stage is None else int(stage.n_inliers),
-                            roi=None if window is None else window.bbox, detail=detail)
+                            roi=None if window is None else window.bbox, detail=detail,
+                            flip_margin=float("nan") if stage is None else float(
+                                stage.factors.get("flip_margin", float("nan"))))
         if status != "bad_input":  # a bad frame says nothing about where the target is
             with self._lock:
                 self._prior = result
@@ -392,9 +399,24 @@ class PoseEstimator:
                 distance_range_m=bundle.distance_range_m, focal_px=self.focal_px, baseline_m=self.baseline_m,
                 sigma_d_px=voting.sigma_d_px / max(stereo.scale, 1e-9), offset_sign=bundle.pose.offset_sign,
                 seed=self.seed)
-        if stage.valid and voting.min_surface_fitness > 0.0 and len(bundle.surface_points):
+        fitness = None
+        if stage.valid and voting.flip_axis and len(bundle.surface_points):
             with timer.stage("verify"):
-                fitness = surface_fitness(stage.R, stage.t, xyz, np.asarray(bundle.surface_points), stage.bandwidth)
+                flip = resolve_flip(stage.R, stage.t, xyz, np.asarray(bundle.surface_points), bundle.centre,
+                                    voting.flip_axis, stage.bandwidth)
+            stage = PoseStageResult(**{**stage.__dict__, "R": flip.R, "t": flip.t,
+                                       "factors": {**stage.factors, "flip_margin": flip.margin}})
+            fitness = flip.fitness
+            if flip.margin < voting.min_flip_margin:
+                logger.info("pose rejected: flip margin %.3f < %.3f", flip.margin, voting.min_flip_margin)
+                return "weak_votes", None, stereo.window, (
+                    f"the pose and its 180° flip about body {voting.flip_axis} fit the stereo points almost "
+                    f"equally (surface fitness {flip.fitness:.3f} vs {flip.fitness_other:.3f})")
+        if stage.valid and voting.min_surface_fitness > 0.0 and len(bundle.surface_points):
+            if fitness is None:
+                with timer.stage("verify"):
+                    fitness = surface_fitness(stage.R, stage.t, xyz, np.asarray(bundle.surface_points),
+                                              stage.bandwidth)
             if fitness < voting.min_surface_fitness:
                 logger.info("pose rejected: surface fitness %.2f < %.2f", fitness, voting.min_surface_fitness)
                 return "fit_residual", None, stereo.window, (
