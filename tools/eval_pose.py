@@ -212,6 +212,7 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
         err = _errors(rec.R, rec.t, result.R, result.t, pts) if result.valid else dict(nan_err)
         row = {"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "valid": bool(result.valid),
                "status": result.status, "confidence": float(result.confidence), "wall_ms": wall, **err,
+               "flip_margin": float(result.flip_margin),
                "R": np.asarray(result.R).tolist(), "t": np.asarray(result.t).tolist()}
         rows.append(row)
         if classical is not None:

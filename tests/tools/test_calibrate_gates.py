@@ -1,0 +1,35 @@
+"""calibrate_gates: the proposed thresholds keep the most poses with no flip and no wrong pose."""
+
+import json
+
+import pytest
+
+from spacepose.tools.calibrate_gates import gate_table, main, propose
+
+ROWS = [
+    {"valid": True, "confidence": 0.9, "flip_margin": 0.04, "e_t": 0.05, "e_R": 2.0},
+    {"valid": True, "confidence": 0.85, "flip_margin": 0.03, "e_t": 0.08, "e_R": 3.0},
+    {"valid": True, "confidence": 0.95, "flip_margin": 0.004, "e_t": 0.10, "e_R": 178.0},   # a flip, small margin
+    {"valid": True, "confidence": 0.55, "flip_margin": 0.06, "e_t": 2.0, "e_R": 40.0},      # wrong, low confidence
+    {"valid": False, "confidence": 0.0, "flip_margin": None, "e_t": None, "e_R": None},
+]
+
+
+def test_table_counts_and_proposal():
+    table = gate_table(ROWS, [0.0, 0.6], [0.0, 0.01], max_e_t=0.5, max_e_r=20.0)
+    open_gates = next(r for r in table if r["min_confidence"] == 0.0 and r["min_flip_margin"] == 0.0)
+    assert (open_gates["kept"], open_gates["flips"], open_gates["wrong"]) == (4, 1, 2)
+    best = propose(table)
+    assert (best["min_confidence"], best["min_flip_margin"], best["kept"]) == (0.6, 0.01, 2)
+    assert propose([r for r in table if r["flips"]]) is None
+
+
+def test_cli_refuses_test_split_and_writes_json(tmp_path, capsys):
+    report = tmp_path / "r.json"
+    report.write_text(json.dumps({"split": "test", "frames": ROWS}))
+    with pytest.raises(SystemExit, match="train"):
+        main([str(report)])
+    report.write_text(json.dumps({"split": "train", "frames": ROWS}))
+    assert main([str(report), "--out", str(tmp_path / "g.json")]) == 0
+    assert json.loads((tmp_path / "g.json").read_text())["proposed"]["kept"] == 2
+    assert "proposed: min_confidence" in capsys.readouterr().out

@@ -1,0 +1,99 @@
+"""Validity thresholds of the pose stage from train-split frames: ``min_confidence`` and ``min_flip_margin``.
+
+    spacepose eval-pose data/tdrs640 --split train --limit 400 --bundle B --out runs/gates_train
+    python -m spacepose.tools.calibrate_gates runs/gates_train/pose_eval.json --out reports/gates_train.json
+
+The evaluation must run with both gates open (``voting.min_confidence`` 0 and ``voting.min_flip_margin``
+0 in bundle B), so that every pose the other checks pass is in the report with its confidence and flip
+margin. For each pair of thresholds on a grid, this counts the poses that would stay valid, the
+180° flips among them (e_R > 90°) and the wrong poses (e_t or e_R over ``--max-e-t`` / ``--max-e-r``).
+It proposes the pair that keeps the most poses with no flip and no wrong pose. Ties go to the stricter
+pair. The thresholds come from train frames only; the test split measures them. Numbers only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+__all__ = ["gate_table", "propose", "main"]
+
+FLIP_DEG = 90.0
+
+
+def _finite(value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+    return v if math.isfinite(v) else float("nan")
+
+
+def gate_table(rows: Iterable[dict[str, Any]], confidences: Sequence[float], margins: Sequence[float],
+               max_e_t: float, max_e_r: float) -> list[dict[str, float]]:
+    """One row per (min_confidence, min_flip_margin): kept poses, flips, wrong poses among them."""
+    ok = [r for r in rows if r.get("valid")]
+    conf = np.array([_finite(r.get("confidence")) for r in ok])
+    margin = np.nan_to_num(np.array([_finite(r.get("flip_margin")) for r in ok]), nan=np.inf)  # no flip stage
+    e_t = np.array([_finite(r.get("e_t")) for r in ok])
+    e_r = np.array([_finite(r.get("e_R")) for r in ok])
+    flip = e_r > FLIP_DEG
+    wrong = (e_t > max_e_t) | (e_r > max_e_r)
+    table = []
+    for c in confidences:
+        for m in margins:
+            keep = (conf >= c) & (margin >= m)
+            table.append({"min_confidence": float(c), "min_flip_margin": float(m), "kept": int(keep.sum()),
+                          "flips": int((keep & flip).sum()), "wrong": int((keep & wrong).sum()),
+                          "e_t_median": float(np.median(e_t[keep])) if keep.any() else float("nan"),
+                          "e_R_median": float(np.median(e_r[keep])) if keep.any() else float("nan")})
+    return table
+
+
+def propose(table: list[dict[str, float]]) -> dict[str, float] | None:
+    """The row keeping the most poses with no flip and no wrong pose (stricter on ties); None if none keeps any."""
+    safe = [r for r in table if r["flips"] == 0 and r["wrong"] == 0 and r["kept"] > 0]
+    if not safe:
+        return None
+    return max(safe, key=lambda r: (r["kept"], r["min_confidence"], r["min_flip_margin"]))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m spacepose.tools.calibrate_gates", description=__doc__.split("\n")[0])
+    p.add_argument("report", type=Path, help="pose_eval.json of eval-pose on train frames with both gates open")
+    p.add_argument("--max-e-t", type=float, default=0.5, help="a pose farther off than this (m) is wrong")
+    p.add_argument("--max-e-r", type=float, default=20.0, help="a pose turned more than this (deg) is wrong")
+    p.add_argument("--out", type=Path, default=None, help="also write the table and proposal as JSON")
+    args = p.parse_args(argv)
+    report = json.loads(args.report.read_text())
+    if report.get("split") == "test":
+        raise SystemExit("calibrate on train frames, not the test split")
+    rows = report["frames"]
+    confidences = [0.0, 0.3, 0.5, 0.6, 0.7, 0.8, 0.9]
+    margins = [0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.08]
+    table = gate_table(rows, confidences, margins, args.max_e_t, args.max_e_r)
+    best = propose(table)
+    print(f"{sum(1 for r in rows if r.get('valid'))} of {len(rows)} {report.get('split')} frames valid with the gates open")
+    print("| min_confidence | min_flip_margin | kept | flips | wrong | e_t median m | e_R median ° |\n|---|---|---|---|---|---|---|")
+    for r in table:
+        print(f"| {r['min_confidence']:.2f} | {r['min_flip_margin']:.3f} | {r['kept']} | {r['flips']} | {r['wrong']} "
+              f"| {r['e_t_median']:.3f} | {r['e_R_median']:.2f} |")
+    print("proposed:", "none (no pair keeps a pose without a flip or a wrong pose)" if best is None else
+          f"min_confidence {best['min_confidence']}, min_flip_margin {best['min_flip_margin']} "
+          f"({best['kept']} poses kept)")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"report": str(args.report), "max_e_t": args.max_e_t, "max_e_r": args.max_e_r,
+                                        "table": table, "proposed": best}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import sys
+
+    sys.exit(main())
