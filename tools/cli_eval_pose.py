@@ -17,13 +17,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--baseline", choices=("classical",), default=None, help="add a classical baseline column")
     parser.add_argument("--overlays", type=int, default=6, help="frames with a projected-box overlay image")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--refine", action="store_true", help="the estimator's ICP refinement after the checks")
 
 
 def run(args: argparse.Namespace) -> int:
     from spacepose.tools.eval_pose import evaluate_pose, format_tables, write_report
 
     report = evaluate_pose(args.dataset, args.bundle, limit=args.limit, baseline=args.baseline, threads=args.threads,
-                           split=args.split, overlays=args.overlays, out_dir=args.out,
+                           split=args.split, overlays=args.overlays, out_dir=args.out, refine=args.refine,
                            progress=lambda i, n: print(f"\r{i}/{n}", end="", flush=True))
     print()
     path = write_report(report, args.out)

@@ -158,9 +158,11 @@ def save_scatter(rows: list[dict[str, Any]], path: str | Path, title: str = "") 
 
 def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limit: int | None = None,
                   baseline: str | None = None, threads: int = 2, split: str = "test", overlays: int = 6,
-                  out_dir: str | Path | None = None, seed: int = 0,
+                  out_dir: str | Path | None = None, seed: int = 0, refine: bool = False,
                   progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
     """Run the flight pipeline (and optionally a baseline) on ``split`` frames; returns the report.
+
+    ``refine`` turns on the estimator's point-to-plane ICP after the validity checks.
 
     Report: ``{"frames": [...per-frame rows...], "ours": {overall, regime:*, distance:*, confidence},
     "baseline": {...} | None, "bundle", "dataset"}``; with ``out_dir`` the overlay images are written
@@ -180,7 +182,7 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
         raise DatasetError(f"{root}: no frames in split {split!r}")
     rig = load_rig(root / "rig.yaml")
     model = load_bundle(bundle)
-    estimator = PoseEstimator(rig, bundle=model, threads=threads, use_prior=False, seed=seed)
+    estimator = PoseEstimator(rig, bundle=model, threads=threads, use_prior=False, seed=seed, refine=refine)
     pts = model_points(model.target_name, np.vstack([model.keypoints, model.bbox_corners]))
     classical: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, bool]] | None = None
     rect = rectify(rig)
@@ -227,7 +229,8 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
             write_image(overlay_dir / f"{rec.frame}.png", img)
         if progress:
             progress(i + 1, len(records))
-    return {"dataset": str(root), "bundle": str(model.path), "split": split, "frames": rows, "ours": _grouped(rows),
+    return {"dataset": str(root), "bundle": str(model.path), "split": split, "refine": bool(refine), "frames": rows,
+            "ours": _grouped(rows),
             "baseline": _grouped(base_rows) if base_rows else None, "baseline_name": baseline,
             "baseline_frames": base_rows}
 

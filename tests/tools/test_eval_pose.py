@@ -72,11 +72,12 @@ def test_full_pipeline_with_baseline(tmp_path_factory, tmp_path, monkeypatch, ca
     cli_eval_pose.add_arguments(parser)
     out = tmp_path / "eval"
     args = parser.parse_args([str(root), "--bundle", str(bundle), "--out", str(out), "--baseline", "classical",
-                              "--overlays", "1"])
+                              "--overlays", "1", "--refine"])
     assert cli_eval_pose.run(args) == 0
     report = json.loads((out / "pose_eval.json").read_text())
     n_test = sum(1 for l in (root / "labels.jsonl").read_text().splitlines() if '"split": "test"' in l)
-    assert report["ours"]["overall"]["frames"] == n_test
+    assert report["ours"]["overall"]["frames"] == n_test and report["refine"] is True
+    assert all("flip_margin" in f for f in report["frames"])
     assert report["baseline"]["overall"]["valid"] == n_test           # the fake baseline is always valid
     assert report["baseline"]["overall"]["e_t_mean"] >= 0.0
     for f in report["frames"]:
