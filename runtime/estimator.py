@@ -5,8 +5,11 @@ The flow of one frame (DESIGN.md), each step a named stage timed in ``PoseResult
     validate -> rectify -> stereo (coarse pass or prior ROI, fine pass) -> pose_inputs (triangulate,
     back-project, sample, RGB crop, kNN indices: spacepose.pose_preprocess, shared with training)
     -> pose_net (ONNX) -> voting
-    (MeanShift + SVD fit, validity, confidence) -> verify (surface fitness against the stereo points,
-    left-right photometric consistency: spacepose.photometric) [-> refine (ICP, off by default)]
+    (MeanShift + SVD fit, validity, confidence) [-> refine (point-to-plane ICP against the stereo
+    points; off by default)] -> verify (with the bundle's ``voting.flip_axis``: the pose or its 180°
+    flip, whichever the stereo points support, both refined when refine is on, spacepose.flip;
+    surface fitness against the stereo points; left-right photometric consistency,
+    spacepose.photometric). The checks judge the pose that is reported, refined or not.
 
 Input rule (one rule, no exceptions): an argument that is not a numpy array is a programming error
 and raises :class:`~spacepose.errors.ShapeError`; every numpy array the estimator cannot use — wrong
@@ -399,11 +402,22 @@ class PoseEstimator:
                 distance_range_m=bundle.distance_range_m, focal_px=self.focal_px, baseline_m=self.baseline_m,
                 sigma_d_px=voting.sigma_d_px / max(stereo.scale, 1e-9), offset_sign=bundle.pose.offset_sign,
                 seed=self.seed)
+        refine = None
+        if stage.valid and self.refine and self._surface_normals is not None:
+            surface, normals, reach = np.asarray(bundle.surface_points), self._surface_normals, 2.0 * stage.bandwidth
+
+            def refine(R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                return refine_icp(R, t, xyz, surface, normals, max_distance=reach, iterations=10, seed=self.seed)
+
+            if not voting.flip_axis:
+                with timer.stage("refine"):
+                    R, t = refine(stage.R, stage.t)
+                stage = PoseStageResult(**{**stage.__dict__, "R": R, "t": t})
         fitness = None
         if stage.valid and voting.flip_axis and len(bundle.surface_points):
-            with timer.stage("verify"):
+            with timer.stage("refine" if refine is not None else "verify"):
                 flip = resolve_flip(stage.R, stage.t, xyz, np.asarray(bundle.surface_points), bundle.centre,
-                                    voting.flip_axis, stage.bandwidth)
+                                    voting.flip_axis, stage.bandwidth, refine=refine)
             stage = PoseStageResult(**{**stage.__dict__, "R": flip.R, "t": flip.t,
                                        "factors": {**stage.factors, "flip_margin": flip.margin}})
             fitness = flip.fitness
@@ -432,9 +446,4 @@ class PoseEstimator:
                     f"the left and right images disagree at the fitted pose (patch ZNCC {photo.score:.2f})")
             if photo.score is None:
                 logger.info("photometric check skipped: %d textured patches", photo.patches)
-        if stage.valid and self.refine and self._surface_normals is not None:
-            with timer.stage("refine"):
-                R, t = refine_icp(stage.R, stage.t, xyz, np.asarray(bundle.surface_points),
-                                  self._surface_normals, max_distance=2.0 * stage.bandwidth, seed=self.seed)
-                stage = PoseStageResult(**{**stage.__dict__, "R": R, "t": t})
         return stage.status, stage, stereo.window, "" if stage.valid else f"pose stage: {stage.status}"

@@ -18,6 +18,7 @@ The flipped pose turns the target about ``axis`` through its centre ``c``:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -65,10 +66,19 @@ class FlipDecision:
 
 
 def resolve_flip(R: np.ndarray, t: np.ndarray, points: np.ndarray, surface: np.ndarray, centre: np.ndarray,
-                 axis: str, tolerance: float) -> FlipDecision:
+                 axis: str, tolerance: float,
+                 refine: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+                 ) -> FlipDecision:
     """Keep whichever of (R, t) and its ``axis`` flip puts more of ``points`` (N, 3, camera frame) on
-    the ``surface`` samples (S, 3, object frame) within ``tolerance`` metres. A tie keeps the input pose."""
+    the ``surface`` samples (S, 3, object frame) within ``tolerance`` metres. A tie keeps the input pose.
+
+    ``refine(R, t) -> (R, t)`` (e.g. ICP against the points), when given, is applied to both poses
+    before they are scored, so neither is favoured by having been refined alone.
+    """
     R_f, t_f = flipped_pose(R, t, centre, axis)
+    if refine is not None:
+        R, t = refine(R, t)
+        R_f, t_f = refine(R_f, t_f)
     f_in = surface_fitness(R, t, points, surface, tolerance)
     f_flip = surface_fitness(R_f, t_f, points, surface, tolerance)
     if f_flip > f_in:

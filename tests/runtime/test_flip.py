@@ -100,3 +100,22 @@ def test_no_flip_axis_no_flip_stage(tmp_path):
     est = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(make_bundle(tmp_path / "c")), threads=1)
     res = est.estimate(*synthetic_pair())
     assert res.valid and np.isnan(res.flip_margin)
+
+
+def test_flip_stage_refines_both_poses_when_refine_is_on(tmp_path, monkeypatch):
+    from spacepose import estimator as est_mod
+
+    calls = []
+    real = est_mod.refine_icp
+
+    def spy(R, t, *args, **kwargs):
+        calls.append(np.array(R))
+        return real(R, t, *args, **kwargs)
+
+    monkeypatch.setattr(est_mod, "refine_icp", spy)
+    surface = np.stack(np.meshgrid(*[np.arange(-4.0, 4.01, 0.3)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    target = dict(manifest()["target"], surface_points=surface.tolist())
+    folder = make_bundle(tmp_path / "b", manifest_overrides={"target": target, "voting": {"min_points": 32, "flip_axis": "z"}})
+    res = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(folder), threads=1, refine=True).estimate(*synthetic_pair())
+    assert res.valid and "refine" in res.timings_ms and len(calls) == 2
+    np.testing.assert_allclose(calls[1], calls[0] @ flip_matrix("z"), atol=1e-9)   # the pose and its flip
