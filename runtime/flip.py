@@ -5,7 +5,9 @@ axis. A pose network trained with ``train-pose --symmetric-flip AXIS`` learns th
 that flip, and the keypoint votes cannot tell the two apart. The geometry can, a little. The target's
 surface at the true pose holds more of the stereo points than at the flipped pose. On 300 train
 frames with ground-truth points, the true pose scored higher on 96 % of frames, and the flip never
-scored higher by more than 0.02 (``reports/photo_calibration_train640``).
+scored higher by more than 0.02. These counts come from the per-frame ``fitness`` rows of
+``reports/photo_calibration_train640/photo_calibration.json``. With the stereo points of session 4's
+graphs at 10–50 m the gap did not tell the flip (model card), so the shipped bundle leaves this off.
 
 :func:`resolve_flip` scores both poses with :func:`spacepose.pose_stage.surface_fitness` and keeps
 the better one. The gap between the two scores is the evidence. The estimator reports the frame
