@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
+from spacepose.flip import flip_matrix as _flip_matrix_np
+
 __all__ = ["PoseLossConfig", "focal_loss", "offset_l1", "offset_l1_min", "flip_matrix", "flipped_keypoint_targets",
            "keypoint_offset_targets", "centre_offset_targets", "pose_loss"]
 
@@ -70,11 +72,9 @@ def offset_l1_min(pred: torch.Tensor, targets: list[torch.Tensor], mask: torch.T
 
 
 def flip_matrix(axis: str) -> torch.Tensor:
-    """(3, 3) rotation by 180 degrees about the body axis ``"x"``, ``"y"`` or ``"z"``."""
-    signs = {"x": (1.0, -1.0, -1.0), "y": (-1.0, 1.0, -1.0), "z": (-1.0, -1.0, 1.0)}
-    if axis not in signs:
-        raise ValueError(f"flip axis must be x, y or z, got {axis!r}")
-    return torch.diag(torch.tensor(signs[axis]))
+    """(3, 3) float32 rotation by 180 degrees about body axis ``"x"``, ``"y"`` or ``"z"``
+    (:func:`spacepose.flip.flip_matrix`, the runtime's, as a tensor)."""
+    return torch.from_numpy(_flip_matrix_np(axis)).to(torch.float32)
 
 
 def flipped_keypoint_targets(kp_targets: torch.Tensor, R: torch.Tensor, keypoints: torch.Tensor,

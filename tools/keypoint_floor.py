@@ -25,11 +25,12 @@ from typing import Sequence
 
 import numpy as np
 
+from spacepose.flip import FLIP_AXES, flip_matrix
+
 __all__ = ["keypoint_floor", "main"]
 
 log = logging.getLogger(__name__)
 
-_AXES = {"x": np.diag([1.0, -1.0, -1.0]), "y": np.diag([-1.0, 1.0, -1.0]), "z": np.diag([-1.0, -1.0, 1.0])}
 
 
 def _kp_l1(pred: np.ndarray, target: np.ndarray, mask: np.ndarray, scale: float) -> float:
@@ -56,7 +57,7 @@ def keypoint_floor(dataset: str | Path, *, checkpoint: str | Path | None = None,
     ds = PoseDataset(dataset, split, spec, PoseDataConfig(depth_source="gt_noisy", augment=False), limit=frames,
                      deterministic=True)
     scale = net_cfg.xyz_scale
-    rows: dict[str, list[float]] = {"centre_only": [], **{f"flip_{a}": [] for a in _AXES}, "network": []}
+    rows: dict[str, list[float]] = {"centre_only": [], **{f"flip_{a}": [] for a in FLIP_AXES}, "network": []}
     kp_obj = ds.keypoints - ds.centre
     for i in range(len(ds)):
         s = ds.sample(i)
@@ -67,8 +68,8 @@ def keypoint_floor(dataset: str | Path, *, checkpoint: str | Path | None = None,
         ctr = s["ctr_targets"].astype(np.float64)
         rows["centre_only"].append(_kp_l1(np.broadcast_to(ctr, target.shape), target, mask, scale))
         R = np.asarray(s["R"], dtype=np.float64)
-        for axis, flip in _AXES.items():
-            moved = (kp_obj @ flip.T - kp_obj) @ R.T        # flipped minus true keypoints, camera frame
+        for axis in FLIP_AXES:
+            moved = (kp_obj @ flip_matrix(axis).T - kp_obj) @ R.T        # flipped minus true keypoints, camera frame
             rows[f"flip_{axis}"].append(_kp_l1(target + 0.5 * moved[:, None, :], target, mask, scale))
         if model is not None:
             feeds = [torch.from_numpy(np.ascontiguousarray(s[n]))[None] for n in model.input_names]

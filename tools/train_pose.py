@@ -26,8 +26,9 @@ import numpy as np
 import torch
 
 from spacepose.errors import DatasetError, SpaceposeError
+from spacepose.flip import flip_matrix
 from spacepose.models.pose_config import PoseNetConfig
-from spacepose.models.pose_loss import PoseLossConfig, flip_matrix, flipped_keypoint_targets, pose_loss
+from spacepose.models.pose_loss import PoseLossConfig, flipped_keypoint_targets, pose_loss
 from spacepose.tools import training_common as tc
 from spacepose.tools.pose_data import PoseDataConfig, PoseDataset
 from spacepose.tools.training_common import CHECKPOINT_NAME, EpochSampler, git_commit
@@ -138,7 +139,7 @@ def validate_pose(model: torch.nn.Module, dataset: PoseDataset, device: torch.de
     model.eval()
     names = model.input_names
     losses, accs, e_t, e_r, e_r_sym, n_valid = [], [], [], [], [], 0
-    flip = None if symmetric_flip is None else flip_matrix(symmetric_flip).numpy()
+    flip = None if symmetric_flip is None else flip_matrix(symmetric_flip)
     for i in range(len(dataset)):
         s = dataset[i]
         batch = {k: v[None] if isinstance(v, torch.Tensor) else v for k, v in s.items()}
