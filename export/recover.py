@@ -71,7 +71,8 @@ def _initializer_positions(proto) -> tuple[list[str], list[tuple[int, int, str]]
 
 
 def _probe(model: nn.Module, seed: int) -> tuple[nn.Module, dict[str, str]]:
-    """Copy of ``model`` with distinct random floats everywhere and identity BatchNorms (random beta).
+    """Copy of ``model`` with distinct random floats everywhere and near-identity BatchNorms (gamma and
+    variance 1 +- 0.1 %, mean +- 0.001, random beta).
 
     Returns the probe and, for each BatchNorm bias key, its module name."""
     probe = copy.deepcopy(model).eval()
@@ -219,18 +220,6 @@ def freeze_batchnorm(model: nn.Module) -> int:
     return n
 
 
-def _graph_metadata(onnx_path: str | os.PathLike) -> dict:
-    import json
-
-    import onnx
-
-    proto = onnx.load(str(onnx_path), load_external_data=False)
-    props = {p.key: p.value for p in proto.metadata_props}
-    if "spacepose" not in props:
-        raise SpaceposeError(f"{onnx_path}: no spacepose metadata; not a graph this project exported")
-    return json.loads(props["spacepose"])
-
-
 def checkpoint_from_graph(onnx_path: str | os.PathLike) -> dict:
     """A training checkpoint (the trainers' format, usable with ``--init``) rebuilt from a shipped graph.
 
@@ -240,8 +229,9 @@ def checkpoint_from_graph(onnx_path: str | os.PathLike) -> dict:
     on the exporter's parity inputs; a difference above the exporters' tolerances raises.
     """
     from spacepose.export import onnx_pose, onnx_stereo
+    from spacepose.onnx_session import read_metadata
 
-    meta = _graph_metadata(onnx_path)
+    meta = read_metadata(onnx_path)
     kind = meta.get("kind")
     training = meta.get("training") or {}
     if kind == "stereo":

@@ -136,5 +136,5 @@ def test_checkpoint_from_graph_rejects_foreign_graph(tmp_path):
                               [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])])
     path = tmp_path / "foreign.onnx"
     onnx.save(helper.make_model(graph), str(path))
-    with pytest.raises(SpaceposeError, match="no spacepose metadata"):
+    with pytest.raises(SpaceposeError, match="no 'spacepose' metadata"):
         checkpoint_from_graph(path)
