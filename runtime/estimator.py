@@ -26,6 +26,7 @@ calls the prior is that of whichever frame finished last.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import os
@@ -412,14 +413,13 @@ class PoseEstimator:
             if not voting.flip_axis:
                 with timer.stage("refine"):
                     R, t = refine(stage.R, stage.t)
-                stage = PoseStageResult(**{**stage.__dict__, "R": R, "t": t})
+                stage = dataclasses.replace(stage, R=R, t=t)
         fitness = None
         if stage.valid and voting.flip_axis and len(bundle.surface_points):
             with timer.stage("refine" if refine is not None else "verify"):
                 flip = resolve_flip(stage.R, stage.t, xyz, np.asarray(bundle.surface_points), bundle.centre,
                                     voting.flip_axis, stage.bandwidth, refine=refine)
-            stage = PoseStageResult(**{**stage.__dict__, "R": flip.R, "t": flip.t,
-                                       "factors": {**stage.factors, "flip_margin": flip.margin}})
+            stage = dataclasses.replace(stage, R=flip.R, t=flip.t, factors={**stage.factors, "flip_margin": flip.margin})
             fitness = flip.fitness
             if flip.margin < voting.min_flip_margin:
                 logger.info("pose rejected: flip margin %.3f < %.3f", flip.margin, voting.min_flip_margin)

@@ -79,7 +79,8 @@ class PoseStageResult:
         centre: (3,) voted centre (NaN if none); ``keypoints`` (M, 3) voted keypoints (NaN rows for
             keypoints without votes); ``keypoint_support`` (M,) int.
         fit_rms: RMS residual of the fit (m, NaN if none); ``bandwidth``: the MeanShift bandwidth (m).
-        factors: the confidence factors (``cluster``, ``keypoints``, ``fit``, ``points``).
+        factors: the confidence factors (``cluster``, ``keypoints``, ``fit``, ``points``); the estimator
+            adds ``flip_margin`` when its flip stage ran (:mod:`spacepose.flip`), not a factor.
     """
 
     R: np.ndarray
