@@ -21,9 +21,9 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-__all__ = ["gate_table", "propose", "main"]
+from spacepose.tools.eval_pose import FLIP_DEG
 
-FLIP_DEG = 90.0
+__all__ = ["gate_table", "propose", "main"]
 
 
 def _finite(value: Any) -> float:
