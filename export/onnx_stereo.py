@@ -4,6 +4,9 @@
 * the iteration loop is unrolled, so the iteration count is frozen into the graph;
 * the graph must contain no ``GridSample`` and no ``ScatterND`` (slow or unsupported on small
   runtimes) — export fails otherwise;
+* grouped and depth-strided Conv3d layers are exported in the exact 2-D form of
+  :mod:`spacepose.export.conv3d_as_2d` (``rewrite_convs``, default on; onnxruntime runs them several
+  times faster), recorded as ``metadata["export"]["conv3d_as_2d"]``;
 * the metadata contract (:mod:`spacepose.export.metadata`) is stored under ``"spacepose"``;
 * parity: torch eager vs onnxruntime on a textured stereo pair, max |Δ| in pixels.
 """
@@ -20,6 +23,7 @@ import torch
 from torch import nn
 
 from spacepose.errors import SpaceposeError
+from spacepose.export.conv3d_as_2d import rewrite_conv3d
 from spacepose.export.metadata import stereo_metadata
 from spacepose.export.onnx_common import (FORBIDDEN_OPS, OPSET, check_overwrite, enforce_parity, export_onnx_file,
                                           forbidden_ops, max_abs_diff, merge_manifest_section, update_manifest)
@@ -61,8 +65,10 @@ def parity_inputs(size: tuple[int, int], seed: int = 0, disparity: float = 12.0)
 
 
 def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int, int], iters: int,
-                  metadata: Mapping[str, Any], force: bool = False, opset: int = OPSET) -> Path:
-    """Export ``model`` at ``size`` (W, H) and ``iters`` into one ONNX file carrying ``metadata``.
+                  metadata: Mapping[str, Any], force: bool = False, opset: int = OPSET,
+                  rewrite_convs: bool = True) -> Path:
+    """Export ``model`` at ``size`` (W, H) and ``iters`` into one ONNX file carrying ``metadata``
+    (plus ``metadata["export"]["conv3d_as_2d"] = rewrite_convs``; ``model`` itself is not changed).
 
     Raises:
         SpaceposeError: ``path`` exists and ``force`` is False, or the graph holds a forbidden op.
@@ -72,7 +78,8 @@ def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int,
     if w % 32 or h % 32:
         raise SpaceposeError(f"export size must be multiples of 32, got {w}x{h}")
     model = model.eval()
-    wrapper = StereoExportWrapper(model, iters).eval()
+    wrapper = StereoExportWrapper(rewrite_conv3d(model) if rewrite_convs else model, iters).eval()
+    metadata = {**metadata, "export": {**dict(metadata.get("export") or {}), "conv3d_as_2d": bool(rewrite_convs)}}
     left, right = (torch.from_numpy(a) for a in parity_inputs((w, h)))
     proto = export_onnx_file(wrapper, (left, right), out, input_names=["left", "right"], output_names=["disparity"],
                              metadata=metadata, opset=opset, graph_name="graph")

@@ -95,22 +95,26 @@ def _probe(model: nn.Module, seed: int) -> tuple[nn.Module, dict[str, str]]:
     return probe, bn_of_bias
 
 
-def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, bool] | None:
-    """The state key whose values are closest to ``value`` flattened (False) or as a 2-D transpose
-    (True), if within 1 % (a folded BatchNorm scales a convolution by its probe gamma, 1 +- 0.3 %)."""
+def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, object] | None:
+    """The state key whose values are closest to ``value``, within 1 % (a folded BatchNorm scales a
+    convolution by its probe gamma, 1 +- 0.3 %), and how it is laid out: ``"flat"`` (same values,
+    flattened), ``"T"`` (a 2-D transpose) or ``("tap", j)`` (depth tap ``ref[:, :, j]`` of a 5-D
+    convolution weight, as :mod:`spacepose.export.conv3d_as_2d` exports it)."""
     flat = value.reshape(-1).astype(np.float64)
     scale = float(np.max(np.abs(flat))) + 1e-12
-    best: tuple[float, str, bool] | None = None
+    best: tuple[float, str, object] | None = None
     for key, ref in candidates.items():
-        if ref.size != flat.size:
-            continue
-        options = [(ref.reshape(-1), False)]
-        if ref.ndim == 2 and value.shape == ref.shape[::-1]:
-            options.append((ref.T.reshape(-1), True))
-        for arr, transposed in options:
+        options: list[tuple[np.ndarray, object]] = []
+        if ref.size == flat.size:
+            options.append((ref.reshape(-1), "flat"))
+            if ref.ndim == 2 and value.shape == ref.shape[::-1]:
+                options.append((ref.T.reshape(-1), "T"))
+        elif ref.ndim == 5 and ref.size == flat.size * ref.shape[2]:
+            options += [(ref[:, :, j].reshape(-1), ("tap", j)) for j in range(ref.shape[2])]
+        for arr, layout in options:
             err = float(np.max(np.abs(arr - flat))) / scale
             if best is None or err < best[0]:
-                best = (err, key, transposed)
+                best = (err, key, layout)
     if best is None or best[0] > 1e-2:
         return None
     return best[1], best[2]
@@ -155,13 +159,14 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
     by_name = {prefix + k: k for k in probe_state}
 
     assigned: dict[str, np.ndarray] = {}
+    taps: dict[str, dict[int, np.ndarray]] = {}
     folded: set[str] = set()
     for (_, _, name_a), (_, _, name_b) in zip(pos_a, pos_b):
         value_a, value_b = probe_vals[name_a], shipped_vals[name_b]
         if value_a.dtype.kind != "f":
             continue                                    # shapes, indices: not weights
         key = by_name.get(name_a)
-        transposed = False
+        layout: object = "flat"
         if key is None or probe_state[key].size != value_a.size or not np.allclose(
                 probe_state[key].reshape(-1), value_a.reshape(-1), rtol=1e-6, atol=1e-7):
             found = _match(value_a, probe_state)
@@ -169,11 +174,20 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
                 if value_a.size <= 1:
                     continue                            # a folded scalar constant (eps, scale)
                 raise SpaceposeError(f"{onnx_path}: initializer {name_b} {list(value_b.shape)} has no source parameter")
-            key, transposed = found
-        value = value_b.T if transposed else value_b
+            key, layout = found
+        if isinstance(layout, tuple):
+            taps.setdefault(key, {})[layout[1]] = value_b
+            continue
+        value = value_b.T if layout == "T" else value_b
         assigned[key] = np.ascontiguousarray(value).reshape(state[key].shape)
         if key in bn_of_bias and not name_a.startswith(prefix + key):
             folded.add(bn_of_bias[key])
+
+    for key, by_tap in taps.items():
+        shape = tuple(state[key].shape)
+        if sorted(by_tap) != list(range(shape[2])):
+            raise SpaceposeError(f"{onnx_path}: only depth taps {sorted(by_tap)} of {key} {list(shape)} are in the graph")
+        assigned[key] = np.stack([np.asarray(by_tap[j]).reshape(shape[:2] + shape[3:]) for j in range(shape[2])], axis=2)
 
     modules = dict(model.named_modules())
     with torch.no_grad():
@@ -241,8 +255,9 @@ def checkpoint_from_graph(onnx_path: str | os.PathLike) -> dict:
         config = StereoConfig.from_dict(meta["config"])
         size, iters = tuple(int(v) for v in meta["input_size"]), int(meta["iters"])
         model = TSCAStereo(config).eval()
+        rewrite = bool((meta.get("export") or {}).get("conv3d_as_2d"))
         report = recover_state_dict(model, onnx_path, lambda m, p: onnx_stereo.export_stereo(
-            m, p, size=size, iters=iters, metadata={}, force=True), prefix="model.")
+            m, p, size=size, iters=iters, metadata={}, force=True, rewrite_convs=rewrite), prefix="model.")
         diff = onnx_stereo.parity_check(model, onnx_path, size=size, iters=iters)
         tolerance = 1e-3
         ckpt = {"kind": "stereo", "stereo_config": config.to_dict()}

@@ -115,6 +115,28 @@ def test_checkpoint_from_graph_feeds_training(stereo_graph, tmp_path):
     model.load_state_dict(ckpt["model"])
 
 
+def test_checkpoint_from_graph_without_conv_rewrite(tmp_path):
+    """Graphs exported before the Conv3d -> Conv2d rewrite (metadata without the flag) still recover."""
+    torch.manual_seed(0)
+    cfg = StereoConfig.cpu()
+    model = _randomise_batchnorm(TSCAStereo(cfg), 6)
+    meta = stereo_metadata(input_size=SIZE, iters=ITERS, stereo_config=cfg.to_dict(), dataset={"seed": 1, "size": 4})
+    path = onnx_stereo.export_stereo(model, tmp_path / "plain.onnx", size=SIZE, iters=ITERS, metadata=meta,
+                                     rewrite_convs=False)
+    assert not any(n.op_type == "Conv" and any(a.name == "group" and a.i > 1 for a in n.attribute)
+                   and len(next(a.ints for a in n.attribute if a.name == "kernel_shape")) == 2
+                   for n in onnx.load(str(path)).graph.node)
+    ckpt = checkpoint_from_graph(path)
+    assert ckpt["parity"] < 1e-3
+    again = TSCAStereo(cfg).eval()
+    again.load_state_dict(ckpt["model"])
+    left, right = (torch.from_numpy(a) for a in onnx_stereo.parity_inputs(SIZE))
+    with torch.no_grad():
+        diff = torch.max(torch.abs(again(left, right, iters=ITERS, test_mode=True)
+                                   - model(left, right, iters=ITERS, test_mode=True)))
+    assert float(diff) < 1e-3
+
+
 def test_checkpoint_from_pose_graph_keeps_target(tmp_path):
     torch.manual_seed(0)
     model = _randomise_batchnorm(PoseNet(NET), 4)
