@@ -74,14 +74,34 @@ def wants_rewrite(module: nn.Module) -> bool:
             and (module.kernel_size != (1, 1, 1) or module.stride[0] > 1))
 
 
+def _fold_batchnorm(conv: nn.Conv3d, bn: nn.BatchNorm3d) -> nn.Conv3d:
+    """A copy of ``conv`` computing ``bn(conv(x))`` in eval mode (what the ONNX exporter does when the
+    BatchNorm directly follows a Conv, which it no longer does once the Conv is rewritten)."""
+    scale = bn.weight.detach() / torch.sqrt(bn.running_var + bn.eps) if bn.affine else 1.0 / torch.sqrt(bn.running_var + bn.eps)
+    shift = bn.bias.detach() if bn.affine else torch.zeros_like(bn.running_mean)
+    folded = copy.deepcopy(conv)
+    bias = conv.bias.detach() if conv.bias is not None else torch.zeros_like(bn.running_mean)
+    folded.weight = nn.Parameter(conv.weight.detach() * scale.reshape(-1, 1, 1, 1, 1), requires_grad=False)
+    folded.bias = nn.Parameter((bias - bn.running_mean) * scale + shift, requires_grad=False)
+    return folded
+
+
 def rewrite_conv3d(module: nn.Module) -> nn.Module:
     """A deep copy of ``module`` in eval mode with every layer :func:`wants_rewrite` accepts replaced by
-    :class:`Conv3dAs2d` (``module`` itself is left untouched)."""
+    :class:`Conv3dAs2d` (``module`` itself is left untouched). A ``BatchNorm3d`` (with running
+    statistics) that directly follows such a layer in an ``nn.Sequential`` is folded into it and
+    becomes ``nn.Identity``."""
     out = copy.deepcopy(module).eval()
     if wants_rewrite(out):
         return Conv3dAs2d(out)
     for parent in list(out.modules()):
-        for name, child in list(parent.named_children()):
-            if wants_rewrite(child):
-                setattr(parent, name, Conv3dAs2d(child))
+        children = list(parent.named_children())
+        for i, (name, child) in enumerate(children):
+            if not wants_rewrite(child):
+                continue
+            after = children[i + 1] if isinstance(parent, nn.Sequential) and i + 1 < len(children) else None
+            if after is not None and isinstance(after[1], nn.BatchNorm3d) and after[1].track_running_stats:
+                child = _fold_batchnorm(child, after[1])
+                setattr(parent, after[0], nn.Identity())
+            setattr(parent, name, Conv3dAs2d(child))
     return out

@@ -66,7 +66,7 @@ def test_rewrite_replaces_only_the_layers_it_speeds_up():
         nn.Conv3d(8, 1, 3, 1, 1),                # one output channel (the classifier) -> kept
     ).eval()
     out = rewrite_conv3d(model)
-    kinds = [type(out[0]), type(out[1]), type(out[2]), type(out[3][0]), type(out[4]), type(out[5])]
+    kinds = [type(m) for m in (out[0], out[1], out[2], out[3][0], out[4], out[5])]
     assert kinds == [Conv3dAs2d, nn.Conv3d, Conv3dAs2d, Conv3dAs2d, nn.Conv3d, nn.Conv3d]
     assert all(type(m) is nn.Conv3d for m in [model[0], model[2], model[3][0]])   # the original is untouched
     assert list(out.state_dict()) == list(model.state_dict())               # same keys and shapes
@@ -75,6 +75,24 @@ def test_rewrite_replaces_only_the_layers_it_speeds_up():
     with torch.no_grad():
         assert float(torch.max(torch.abs(out(x) - model(x)))) < 1e-5
     assert wants_rewrite(nn.Conv3d(8, 8, 3, groups=2)) and not wants_rewrite(nn.Conv2d(8, 8, 3, groups=2))
+
+
+def test_batchnorm_after_a_rewritten_layer_is_folded():
+    torch.manual_seed(3)
+    model = nn.Sequential(nn.Conv3d(8, 8, 3, 2, 1, groups=8, bias=False), nn.BatchNorm3d(8), nn.LeakyReLU(0.2),
+                          nn.Conv3d(8, 8, 1), nn.BatchNorm3d(8)).eval()
+    with torch.no_grad():
+        for bn in (model[1], model[4]):
+            bn.weight.uniform_(0.5, 1.5)
+            bn.bias.normal_()
+            bn.running_mean.normal_()
+            bn.running_var.uniform_(0.5, 2.0)
+    out = rewrite_conv3d(model)
+    assert isinstance(out[0], Conv3dAs2d) and isinstance(out[1], nn.Identity)
+    assert isinstance(out[4], nn.BatchNorm3d)                                # after a kept 1x1x1 conv: untouched
+    x = torch.randn(1, 8, 6, 8, 8)
+    with torch.no_grad():
+        assert float(torch.max(torch.abs(out(x) - model(x)))) < 1e-5
 
 
 def test_rejects_what_it_cannot_express():
