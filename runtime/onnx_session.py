@@ -23,13 +23,15 @@ __all__ = ["METADATA_KEY", "make_session", "read_metadata", "session_metadata", 
 METADATA_KEY = "spacepose"
 
 
-def make_session(path: str | os.PathLike, *, threads: int = 2, mem_arena: bool = False, optimize: bool = True):
+def make_session(path: str | os.PathLike, *, threads: int = 2, mem_arena: bool = False, optimize: bool = True,
+                 spinning: bool = False):
     """An onnxruntime CPU ``InferenceSession`` for ``path``.
 
     Args:
         threads: intra-op threads (inter-op is 1: the graph runs sequentially).
         mem_arena: onnxruntime's CPU memory arena; off by default because it inflates peak RSS.
         optimize: full graph optimisations (``ORT_ENABLE_ALL``) when True, basic otherwise.
+        spinning: let idle intra-op workers spin instead of sleeping (see the comment below).
 
     Raises:
         BundleError: the file is missing or onnxruntime cannot load it.
@@ -50,10 +52,11 @@ def make_session(path: str | os.PathLike, *, threads: int = 2, mem_arena: bool =
         ort.GraphOptimizationLevel.ORT_ENABLE_ALL if optimize else ort.GraphOptimizationLevel.ORT_ENABLE_BASIC
     )
     opts.log_severity_level = 3
-    # worker threads sleep between runs instead of spinning: the pipeline's numpy/OpenCV work runs
-    # between graph calls on the same cores, and spinning workers starve it (measured: kNN and
-    # voting took twice as long with spinning on)
-    opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    # by default worker threads sleep between runs instead of spinning: the pipeline's numpy/OpenCV
+    # work runs between graph calls on the same cores, and spinning workers starve it (session 3: kNN
+    # and voting took twice as long with every session spinning). The stereo stage turns it on for
+    # its own session only (spacepose.stereo_stage.StereoMatcher documents the measurement).
+    opts.add_session_config_entry("session.intra_op.allow_spinning", "1" if spinning else "0")
     try:
         return ort.InferenceSession(str(p), sess_options=opts, providers=["CPUExecutionProvider"])
     except Exception as err:  # onnxruntime raises its own Fail/InvalidGraph/... types

@@ -27,6 +27,8 @@ def test_session_options_and_metadata(tiny_stereo_graph):
     assert opts.intra_op_num_threads == 1 and not opts.enable_cpu_mem_arena
     # workers sleep between runs, so the pipeline's numpy work between graph calls keeps its cores
     assert opts.get_session_config_entry("session.intra_op.allow_spinning") == "0"
+    spinning = make_session(tiny_stereo_graph, threads=1, spinning=True).get_session_options()
+    assert spinning.get_session_config_entry("session.intra_op.allow_spinning") == "1"
 
 
 def test_graph_without_contract_is_refused(tmp_path):
