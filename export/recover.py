@@ -53,10 +53,10 @@ class RecoveryReport:
     missing: tuple[str, ...]
 
 
-def _initializer_positions(proto) -> tuple[list[str], list[tuple[int, int, str]]]:
-    """Op types of the non-Identity nodes, and (node index, input index, initializer name) for every
-    input of those nodes that is an initializer, directly or through Identity nodes (the exporter
-    deduplicates equal initializers with Identity nodes, so their number depends on the values)."""
+def _initializer_positions(proto) -> tuple[list[tuple[str, str]], list[tuple[int, int, str]]]:
+    """(op type, node name) of the non-Identity nodes, and (node index, input index, initializer name)
+    for every input of those nodes that is an initializer, directly or through Identity nodes (the
+    exporter deduplicates equal initializers with Identity nodes, so their number depends on the values)."""
     names = {init.name for init in proto.graph.initializer}
     alias: dict[str, str] = {}
     for node in proto.graph.node:
@@ -67,7 +67,29 @@ def _initializer_positions(proto) -> tuple[list[str], list[tuple[int, int, str]]
     nodes = [n for n in proto.graph.node if not (n.op_type == "Identity" and n.output[0] in alias)]
     positions = [(i, j, alias.get(x, x)) for i, node in enumerate(nodes) for j, x in enumerate(node.input)
                  if alias.get(x, x) in names]
-    return [n.op_type for n in nodes], positions
+    return [(n.op_type, n.name) for n in nodes], positions
+
+
+def _pair_initializers(nodes_a, pos_a, nodes_b, pos_b, where: str) -> list[tuple[str, str | None]]:
+    """(probe initializer, shipped initializer) pairs that feed the same node input.
+
+    Graphs of the same export code pair by position. A graph exported by an older version of the code
+    (other weight-free nodes, e.g. a rewritten lookup) pairs by (node name, input index): the exporter
+    names nodes after the module path, so weight-bearing nodes keep their names. A probe initializer
+    whose node the shipped graph lacks is paired with None (the caller accepts that only for
+    constants that are not weights)."""
+    if nodes_a == nodes_b and [p[:2] for p in pos_a] == [p[:2] for p in pos_b]:
+        return [(a[2], b[2]) for a, b in zip(pos_a, pos_b)]
+    names_a, names_b = [n[1] for n in nodes_a], [n[1] for n in nodes_b]
+    if not all(names_a) or not all(names_b) or len(set(names_a)) < len(names_a) or len(set(names_b)) < len(names_b):
+        raise SpaceposeError(f"{where}: graph structure differs from this model's export "
+                             f"({len(nodes_b)} vs {len(nodes_a)} nodes) and its node names cannot pair them")
+    shipped = {(nodes_b[i][1], j): (nodes_b[i][0], name) for i, j, name in pos_b}
+    pairs: list[tuple[str, str | None]] = []
+    for i, j, name in pos_a:
+        found = shipped.get((nodes_a[i][1], j))
+        pairs.append((name, found[1] if found is not None and found[0] == nodes_a[i][0] else None))
+    return pairs
 
 
 def _probe(model: nn.Module, seed: int) -> tuple[nn.Module, dict[str, str]]:
@@ -145,13 +167,9 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
         probe_path = Path(tmp) / "probe.onnx"
         export(probe, probe_path)
         probe_proto = onnx.load(str(probe_path))
-    ops_a, pos_a = _initializer_positions(probe_proto)
-    ops_b, pos_b = _initializer_positions(shipped)
-    if ops_a != ops_b:
-        raise SpaceposeError(f"{onnx_path}: graph structure differs from this model's export "
-                             f"({len(ops_b)} vs {len(ops_a)} nodes); is the config the one it was exported with?")
-    if [p[:2] for p in pos_a] != [p[:2] for p in pos_b]:
-        raise SpaceposeError(f"{onnx_path}: initializers sit at other node inputs than in this model's export")
+    nodes_a, pos_a = _initializer_positions(probe_proto)
+    nodes_b, pos_b = _initializer_positions(shipped)
+    pairs = _pair_initializers(nodes_a, pos_a, nodes_b, pos_b, str(onnx_path))
     probe_vals = {i.name: numpy_helper.to_array(i) for i in probe_proto.graph.initializer}
     shipped_vals = {i.name: numpy_helper.to_array(i) for i in shipped.graph.initializer}
     state = model.state_dict()
@@ -161,10 +179,17 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
     assigned: dict[str, np.ndarray] = {}
     taps: dict[str, dict[int, np.ndarray]] = {}
     folded: set[str] = set()
-    for (_, _, name_a), (_, _, name_b) in zip(pos_a, pos_b):
-        value_a, value_b = probe_vals[name_a], shipped_vals[name_b]
+    for name_a, name_b in pairs:
+        value_a = probe_vals[name_a]
         if value_a.dtype.kind != "f":
             continue                                    # shapes, indices: not weights
+        if name_b is None:
+            if value_a.size <= 1:
+                continue                                # a scalar constant of a node the shipped graph lacks
+            raise SpaceposeError(f"{onnx_path}: graph structure differs from this model's export: the node fed "
+                                 f"by {name_a} {list(value_a.shape)} is not in it; is the config the one it was "
+                                 "exported with?")
+        value_b = shipped_vals[name_b]
         key = by_name.get(name_a)
         layout: object = "flat"
         if key is None or probe_state[key].size != value_a.size or not np.allclose(

@@ -51,7 +51,8 @@ def _worker(args: argparse.Namespace) -> None:
     if args.backend == "ort":
         from spacepose.onnx_session import make_session
 
-        session = make_session(args.onnx, threads=args.threads)
+        # the session options of the flight runtime: the stereo stage lets its workers spin
+        session = make_session(args.onnx, threads=args.threads, spinning=args.graph == "stereo")
         outputs = [o.name for o in session.get_outputs()]
         result = time_calls(lambda f: session.run(outputs, f), feeds, args.repeats)
     else:

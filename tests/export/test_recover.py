@@ -137,6 +137,29 @@ def test_checkpoint_from_graph_without_conv_rewrite(tmp_path):
     assert float(diff) < 1e-3
 
 
+def test_graph_from_older_export_code_pairs_by_node_name(tmp_path, monkeypatch):
+    """A graph whose weight-free nodes differ from this code's export (e.g. exported before the lookup
+    was rewritten) still recovers: weight-bearing nodes pair by name."""
+    import spacepose.models.tsca_stereo as tsca
+    from spacepose.models.stereo_lookup import GeometryLookup
+
+    class OlderLookup(GeometryLookup):
+        def __call__(self, disp):
+            return super().__call__(disp) * torch.ones(1)        # one more (weight-free) node per iteration
+
+    torch.manual_seed(0)
+    cfg = StereoConfig.cpu()
+    model = _randomise_batchnorm(TSCAStereo(cfg), 7)
+    with monkeypatch.context() as patch:
+        patch.setattr(tsca, "GeometryLookup", OlderLookup)
+        path = onnx_stereo.export_stereo(model, tmp_path / "older.onnx", size=SIZE, iters=ITERS, metadata={})
+    torch.manual_seed(9)
+    again = TSCAStereo(cfg).eval()
+    report = recover_state_dict(again, path, _export_stereo, prefix="model.")
+    assert report.folded_bn and all(k.startswith("init_mask.") for k in report.missing)
+    assert onnx_stereo.parity_check(again, path, size=SIZE, iters=ITERS) < 1e-3
+
+
 def test_checkpoint_from_pose_graph_keeps_target(tmp_path):
     torch.manual_seed(0)
     model = _randomise_batchnorm(PoseNet(NET), 4)
