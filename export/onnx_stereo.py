@@ -4,9 +4,9 @@
 * the iteration loop is unrolled, so the iteration count is frozen into the graph;
 * the graph must contain no ``GridSample`` and no ``ScatterND`` (slow or unsupported on small
   runtimes) — export fails otherwise;
-* grouped and depth-strided Conv3d layers are exported in the exact 2-D form of
-  :mod:`spacepose.export.conv3d_as_2d` (``rewrite_convs``, default on; onnxruntime runs them several
-  times faster), recorded as ``metadata["export"]["conv3d_as_2d"]``;
+* Conv3d layers wider than 1x1x1 with at least 8 outputs are exported in the exact 2-D form of
+  :mod:`spacepose.export.conv3d_as_2d` (``rewrite_convs``, default on; onnxruntime runs depthwise ones
+  several times faster, dense ones about 1.5x), recorded as ``metadata["export"]["conv3d_as_2d"]``;
 * the metadata contract (:mod:`spacepose.export.metadata`) is stored under ``"spacepose"``;
 * parity: torch eager vs onnxruntime on a textured stereo pair, max |Δ| in pixels.
 """
