@@ -7,10 +7,11 @@ slower than torch eager, and its dense 3x3x3 convolutions run at about half torc
 :class:`Conv3dAs2d` computes the *same* function as a ``Conv3d``: the sum over its ``k_d`` depth taps
 of a ``Conv2d`` applied to every (shifted, strided) depth slice, the slices folded into the batch axis.
 
-Measured on this machine, one thread, onnxruntime 1.32 (``python -m spacepose.tools.bench_conv3d``):
-depthwise 32-channel 5x5x5 at 12x32x32 runs 22.9 -> 3.2 ms, the dense 16-channel 3x3x3 at 24x64x64
-36.5 -> 23.2 ms (``reports/bench_conv3d.json``). 1x1x1 layers already run as one GEMM and stay, as
-do layers with fewer than :data:`MIN_OUT_CHANNELS` outputs.
+Measured on this machine, one thread, onnxruntime 1.32, with a training job on the other core
+(``python -m spacepose.tools.bench_conv3d --json reports/bench_conv3d.json``): depthwise 32-channel
+5x5x5 at 12x32x32 runs 20.1 -> 3.6 ms (torch eager 4.3), the dense 16-channel 3x3x3 at 24x64x64
+26.4 -> 22.1 ms (torch 11.3). 1x1x1 layers already run as one GEMM and stay, as do layers with fewer
+than :data:`MIN_OUT_CHANNELS` outputs.
 
 Only the export uses this: training and the torch-eager baseline run the original layers, and the
 export's parity check (torch original vs onnxruntime rewritten) guards the equivalence.
