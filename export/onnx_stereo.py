@@ -6,7 +6,7 @@
   runtimes) — export fails otherwise;
 * Conv3d layers wider than 1x1x1 with at least 8 outputs are exported in the exact 2-D form of
   :mod:`spacepose.export.conv3d_as_2d` (``rewrite_convs``, default on; onnxruntime runs depthwise ones
-  several times faster, dense ones about 1.5x), recorded as ``metadata["export"]["conv3d_as_2d"]``;
+  several times faster, dense ones 1.2-1.6x), recorded as ``metadata["export"]["conv3d_as_2d"]``;
 * the metadata contract (:mod:`spacepose.export.metadata`) is stored under ``"spacepose"``;
 * parity: torch eager vs onnxruntime on a textured stereo pair, max |Δ| in pixels.
 """
