@@ -134,10 +134,12 @@ class StereoMatcher:
         mem_arena: onnxruntime CPU memory arena (off: lower peak RSS).
         infinity_check: drop coarse-pass pixels that match better at zero disparity (:mod:`spacepose.infinity`).
         spinning: onnxruntime workers spin between the graph's operators instead of sleeping. The
-            stereo graph has about 2,000 small nodes and waking a sleeping worker for each costs more
-            than it saves: at 1280x960 on 2 threads the stereo stage took 571 ms (p50) with spinning
-            and 614 ms without, while the numpy stage after it slowed by 7 ms (session 5,
-            ``spacepose profile``). The pose session keeps its workers sleeping.
+            stereo graph has about 2,000 small nodes, and waking a sleeping worker for each costs more
+            than it saves. Session 5, ``spacepose profile`` at 1280x960 on 2 threads: stereo stage p50
+            511 ms with spinning, 645 ms without; frame total 587 vs 721 ms. The price: the workers
+            still spin when the numpy stage after the graph starts, and ``pose_inputs`` took 45 instead
+            of 28 ms (the share of time outside the graphs 13.0 % instead of 10.3 %). The pose
+            session keeps its workers sleeping.
     """
 
     def __init__(self, onnx_path: str | os.PathLike, threads: int = 2, *, coarse_threshold: float = 2.0,
