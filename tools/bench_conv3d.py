@@ -1,5 +1,5 @@
 """Benchmark: one Conv3d layer in torch eager, in onnxruntime as exported, and in onnxruntime in the
-2-D form of :mod:`spacepose.export.conv3d_as_2d` (why the stereo export rewrites grouped / strided layers).
+2-D form of :mod:`spacepose.export.conv3d_as_2d` (why the stereo export rewrites its 3-D convolutions).
 
     python -m spacepose.tools.bench_conv3d --threads 1 --json reports/bench_conv3d.json
 
@@ -12,10 +12,11 @@ from __future__ import annotations
 import argparse
 import io
 import json
-import time
 from pathlib import Path
 
 import numpy as np
+
+from spacepose.tools.bench_graphs import time_calls
 
 __all__ = ["LAYERS", "bench_layer", "main"]
 
@@ -30,13 +31,8 @@ LAYERS = {
 
 
 def _median_ms(fn, runs: int) -> float:
-    fn()
-    times = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times))
+    """Median ms of ``fn()`` over ``runs`` calls after one warm-up (:func:`time_calls`)."""
+    return time_calls(lambda _: fn(), [None], runs)["median_ms"]
 
 
 def bench_layer(spec: tuple, threads: int, runs: int = 10) -> dict[str, float]:
