@@ -57,6 +57,10 @@ def make_session(path: str | os.PathLike, *, threads: int = 2, mem_arena: bool =
     # and voting took twice as long with every session spinning). The stereo stage turns it on for
     # its own session only (spacepose.stereo_stage.StereoMatcher documents the measurement).
     opts.add_session_config_entry("session.intra_op.allow_spinning", "1" if spinning else "0")
+    if spinning:
+        # spin between the graph's operators only: when run() returns, the workers stop spinning at
+        # once instead of competing with the numpy stage that follows for the same cores
+        opts.add_session_config_entry("session.force_spinning_stop", "1")
     try:
         return ort.InferenceSession(str(p), sess_options=opts, providers=["CPUExecutionProvider"])
     except Exception as err:  # onnxruntime raises its own Fail/InvalidGraph/... types

@@ -29,6 +29,8 @@ def test_session_options_and_metadata(tiny_stereo_graph):
     assert opts.get_session_config_entry("session.intra_op.allow_spinning") == "0"
     spinning = make_session(tiny_stereo_graph, threads=1, spinning=True).get_session_options()
     assert spinning.get_session_config_entry("session.intra_op.allow_spinning") == "1"
+    # ...but only inside run(): they stop spinning when it returns
+    assert spinning.get_session_config_entry("session.force_spinning_stop") == "1"
 
 
 def test_graph_without_contract_is_refused(tmp_path):
