@@ -31,6 +31,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fine-tune: start from this checkpoint's weights with a fresh optimiser and schedule")
     parser.add_argument("--target-weight", type=float, default=1.0,
                         help="loss weight of target pixels relative to the background's (default 1: plain mean)")
+    parser.add_argument("--edge-weight", type=float, default=1.0,
+                        help="extra loss factor of target pixels near the silhouette (default 1: none)")
+    parser.add_argument("--edge-radius", type=int, default=3,
+                        help="silhouette band of --edge-weight, in pixels (default 3)")
     add_loop_arguments(parser, workers=0)
 
 
@@ -58,9 +62,12 @@ def run(args: argparse.Namespace) -> int:
                       ckpt_every=args.ckpt_every, val_every=args.val_every, val_samples=args.val_samples,
                       log_every=args.log_every, workers=args.workers, threads=args.threads, seed=args.seed,
                       limit=args.limit, oversample=dict(args.oversample),
-                      init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s, target_weight=args.target_weight)
+                      init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s, target_weight=args.target_weight,
+                      edge_weight=args.edge_weight, edge_radius=args.edge_radius)
     if not args.target_weight > 0:
         raise SystemExit("--target-weight must be > 0")
+    if not args.edge_weight > 0 or args.edge_radius < 1:
+        raise SystemExit("--edge-weight must be > 0 and --edge-radius >= 1")
     if args.init and args.resume:
         raise SystemExit("--init starts a new run; --resume continues one: give one of them")
     summary = train_stereo(cfg, resume=args.resume)

@@ -70,6 +70,9 @@ class TrainConfig:
     time_limit_s: float | None = None
     #: loss weight of target pixels relative to background pixels (1: plain mean over valid pixels)
     target_weight: float = 1.0
+    #: extra factor for target pixels within ``edge_radius`` px of the silhouette (1: none)
+    edge_weight: float = 1.0
+    edge_radius: int = 3
     stereo: dict[str, Any] = field(default_factory=dict)  # StereoConfig overrides
 
     def stereo_config(self) -> StereoConfig:
@@ -206,9 +209,9 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         left, right = batch["left"].to(device), batch["right"].to(device)
         gt, valid = batch["disparity"].to(device), batch["valid"].to(device)
         init_disp, preds = net(left, right, iters=cfg.iters)
-        weight = None
-        if cfg.target_weight != 1.0:
-            weight = 1.0 + (cfg.target_weight - 1.0) * batch["target"].to(device)
+        from spacepose.models.stereo_loss import pixel_weights
+
+        weight = pixel_weights(batch["target"].to(device), cfg.target_weight, cfg.edge_weight, cfg.edge_radius)
         loss, metrics = _sequence_loss(init_disp, preds, gt, valid, stereo_cfg.max_disp, weight)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()

@@ -62,3 +62,30 @@ def test_weighted_loss_is_a_weighted_mean_and_metrics_stay_unweighted():
     assert min(float(ref), float(plain)) - 1e-6 <= float(heavier) <= max(float(ref), float(plain)) + 1e-6
     with pytest.raises(ShapeError):
         sequence_loss(init, preds, gt, valid, max_disp=64, weight=torch.ones(2, 1, 4, 4))
+
+
+def test_silhouette_band_and_pixel_weights():
+    from spacepose.models.stereo_loss import pixel_weights, silhouette_band
+
+    target = torch.zeros(1, 1, 12, 12, dtype=torch.bool)
+    target[0, 0, 2:10, 2:10] = True                      # an 8x8 square
+    target[0, 0, 0:4, 0] = True                          # touching the image border (left column)
+    band = silhouette_band(target, 2)
+    sq = band[0, 0, 2:10, 2:10]
+    assert sq[:2].all() and sq[-2:].all() and sq[:, :2].all() and sq[:, -2:].all()
+    assert not sq[2:6, 2:6].any()                        # interior: more than 2 px from the background
+    assert not band[0, 0][~target[0, 0]].any()           # only target pixels are in the band
+    # (0, 0) is target with background at (1, 1): in the band
+    assert band[0, 0, 0, 0]
+    lone = torch.zeros(1, 1, 5, 5, dtype=torch.bool)
+    lone[0, 0, :, :] = True                              # all target: no background anywhere
+    assert not silhouette_band(lone, 1).any()            # the border padding is not background
+
+    assert pixel_weights(target.float()) is None
+    w = pixel_weights(target.float(), target_weight=4.0, edge_weight=3.0, edge_radius=2)
+    assert w.shape == target.shape and w.dtype == torch.float32
+    assert w[0, 0, 0, 11] == 1.0                         # background
+    assert w[0, 0, 5, 5] == 4.0                          # target interior
+    assert w[0, 0, 2, 5] == 12.0                         # target in the band
+    with pytest.raises(ValueError):
+        silhouette_band(target, 0)

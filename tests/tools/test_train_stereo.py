@@ -124,6 +124,10 @@ def test_target_weight_reaches_the_loss(synthetic_dataset, tmp_path, monkeypatch
     train_stereo(cfg)
     assert len(seen) == 1 and seen[0] is not None
     assert set(torch.unique(seen[0]).tolist()) <= {1.0, 4.0} and float(seen[0].max()) == 4.0
+    seen.clear()
+    train_stereo(dataclasses.replace(cfg, out=str(tmp_path / "ew"), edge_weight=3.0, edge_radius=2))
+    assert len(seen) == 1 and float(seen[0].max()) == 12.0  # target pixels on the silhouette: 4 x 3
+    assert set(torch.unique(seen[0]).tolist()) <= {1.0, 4.0, 12.0}
 
 
 def test_time_limit_stops_with_a_resumable_checkpoint(synthetic_dataset, tmp_path):
