@@ -3,7 +3,9 @@
 Metrics (paper §5.1) over *target pixels* (``mask & gt > 0``) of full test frames: EPE, RMSE, bad-1,
 bad-3 (%) and D1 (%, error > 3 px and > 5 % of GT). Aggregated pixel-weighted — as if all target
 pixels of all frames were one set — overall, per illumination regime and per distance bin (z of t:
-10-20, 20-30, 30-40, 40-50 m). A pixel with no estimate (SGBM invalid, outside our window) counts
+10-20, 20-30, 30-40, 40-50 m), and split by region: ``region:silhouette`` (target pixels within
+:data:`SILHOUETTE_RADIUS` px of a non-target pixel, where a coarse-to-fine network blurs the outline into
+the background) and ``region:interior`` (the rest). A pixel with no estimate (SGBM invalid, outside our window) counts
 with disparity 0, i.e. as an error; the density of each method is reported next to it.
 
 Classical baseline: ``cv2.StereoSGBM`` in ``MODE_SGBM_3WAY`` on the grey images with
@@ -122,6 +124,20 @@ class MetricAccumulator:
         return out
 
 
+#: Chebyshev radius (px) of the ``region:silhouette`` band; the training's ``--edge-radius`` default
+SILHOUETTE_RADIUS = 3
+
+
+def silhouette_band(valid: np.ndarray, radius: int = SILHOUETTE_RADIUS) -> np.ndarray:
+    """(H, W) bool: ``valid`` pixels within ``radius`` px (Chebyshev) of a non-valid pixel.
+
+    The image border does not count as background (erosion pads with the maximum).
+    """
+    kernel = np.ones((2 * radius + 1, 2 * radius + 1), np.uint8)
+    interior = cv2.erode(valid.astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT, borderValue=1) > 0
+    return valid & ~interior
+
+
 def _groups(rec: FrameRecord) -> Iterable[str]:
     yield "overall"
     yield f"regime:{rec.regime}"
@@ -196,6 +212,7 @@ def evaluate_stereo(dataset: str | Path, graph: str | Path, *, limit: int | None
     for rec in recs:
         left, right, gt, valid = _load_test_frame(root, rec)
         left_r, right_r = rect.rectify_pair(left, right)
+        band = silhouette_band(valid)
         t0 = time.perf_counter()
         ours = matcher.match(left_r, right_r).disparity
         t1 = time.perf_counter()
@@ -206,6 +223,8 @@ def evaluate_stereo(dataset: str | Path, graph: str | Path, *, limit: int | None
         for name, pred in (("ours", ours), ("sgbm", classic)):
             for g in _groups(rec):
                 acc[name].setdefault(g, MetricAccumulator()).add(pred, gt, valid)
+            for g, region in (("region:silhouette", band), ("region:interior", valid & ~band)):
+                acc[name].setdefault(g, MetricAccumulator()).add(pred, gt, region)
         frame_rows.append(_frame_row(rec, ours, classic, gt, valid))
         if figure is not None and len(fig_rows) < n_figure and rec.regime not in seen_regimes and valid.any():
             seen_regimes.add(rec.regime)
@@ -228,7 +247,8 @@ def evaluate_stereo(dataset: str | Path, graph: str | Path, *, limit: int | None
 
 
 def _group_order(name: str) -> tuple[int, str]:
-    return (0 if name == "overall" else 1 if name.startswith("regime") else 2, name)
+    rank = {"overall": 0, "regime": 1, "distance": 2, "region": 3}.get(name.split(":")[0], 4)
+    return (rank, name)
 
 
 def format_table(report: dict[str, Any]) -> str:

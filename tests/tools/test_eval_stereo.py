@@ -44,6 +44,9 @@ def test_eval_cli(synthetic_dataset, tiny_bundle, tmp_path, capsys):
         assert {g for g in groups if g.startswith("regime:")} == {"regime:sun", "regime:albedo", "regime:penumbra",
                                                                   "regime:mixed"}
         assert sum(groups[g]["pixels"] for g in groups if g.startswith("distance:")) == groups["overall"]["pixels"]
+        regions = [g for g in groups if g.startswith("region:")]
+        assert regions == ["region:interior", "region:silhouette"] and list(groups)[-2:] == regions
+        assert sum(groups[g]["pixels"] for g in regions) == groups["overall"]["pixels"]
     assert (out / "stereo_fig13.png").stat().st_size > 1000
     assert "| overall | sgbm |" in format_table(report)
     assert report["sgbm_params"]["mode"] == "SGBM_3WAY"
@@ -52,3 +55,17 @@ def test_eval_cli(synthetic_dataset, tiny_bundle, tmp_path, capsys):
     assert len(rows) == 4 and all(set(r["ours"]) == {"epe", "median", "zero_share"} for r in rows)
     assert all(0.0 <= r["sgbm"]["zero_share"] <= 1.0 and r["ours"]["median"] <= r["ours"]["epe"] * 10 + 1e-6 for r in rows)
     assert min(r["ours"]["epe"] for r in rows) <= report["ours"]["overall"]["epe"] <= max(r["ours"]["epe"] for r in rows)
+
+
+def test_silhouette_band():
+    from spacepose.tools.eval_stereo import silhouette_band
+
+    valid = np.zeros((12, 12), bool)
+    valid[2:10, 2:10] = True
+    valid[0:3, 11] = True  # on the image border
+    band = silhouette_band(valid, radius=2)
+    assert not band[~valid].any()
+    sq = band[2:10, 2:10]
+    assert sq[:2].all() and sq[-2:].all() and sq[:, :2].all() and sq[:, -2:].all() and not sq[2:6, 2:6].any()
+    full = np.ones((6, 6), bool)
+    assert not silhouette_band(full, 1).any()  # the image border is not background
