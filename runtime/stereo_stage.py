@@ -135,11 +135,12 @@ class StereoMatcher:
         infinity_check: drop coarse-pass pixels that match better at zero disparity (:mod:`spacepose.infinity`).
         spinning: onnxruntime workers spin between the graph's operators instead of sleeping. The
             stereo graph has about 2,000 small nodes, and waking a sleeping worker for each costs more
-            than it saves. Session 5, ``spacepose profile`` at 1280x960 on 2 threads: stereo stage p50
-            511 ms with spinning, 645 ms without; frame total 587 vs 721 ms. The price: the workers
-            still spin when the numpy stage after the graph starts, and ``pose_inputs`` took 45 instead
-            of 28 ms (the share of time outside the graphs 13.0 % instead of 10.3 %). The pose
-            session keeps its workers sleeping.
+            than it saves (session 5, ``spacepose profile`` at 1280x960 on 2 threads: stereo stage p50
+            511 ms with spinning, 645 ms without). The workers stop spinning as soon as ``run()``
+            returns (``session.force_spinning_stop``), so they do not slow the numpy stage after the
+            graph. Session 6, same command, two runs each: with the stop, ``pose_inputs`` p50 29 / 31 ms
+            and 10.2 / 10.1 % of the time outside the graphs; without it, 41 / 43 ms and 12.0 / 11.3 %
+            (``reports/profile1280_s6_*.json``). The pose session keeps its workers sleeping.
     """
 
     def __init__(self, onnx_path: str | os.PathLike, threads: int = 2, *, coarse_threshold: float = 2.0,
