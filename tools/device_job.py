@@ -50,8 +50,8 @@ def job_commands(args: argparse.Namespace, work: Path) -> dict[str, list[list[st
     stereo = _spacepose("train-stereo", str(data), "--out", str(work / "stereo"), "--steps", str(args.stereo_steps),
                         "--batch", str(args.stereo_batch), "--train-crop", "160x160", "--init",
                         str(work / "init_stereo.pt"), "--lr", str(args.stereo_lr), "--workers",
-                        str(args.loader_workers), "--target-weight", str(args.target_weight), "--oversample",
-                        "mixed=3", "penumbra=2", *common)
+                        str(args.loader_workers), "--target-weight", str(args.target_weight), "--edge-weight",
+                        str(args.edge_weight), "--oversample", "mixed=3", "penumbra=2", *common)
     pose = _spacepose("train-pose", str(data), "--out", str(work / "pose"), "--steps", str(args.pose_steps),
                       "--batch", str(args.pose_batch), "--depth-source", "gt_noisy", "--init",
                       str(work / "init_pose.pt"), "--lr-min", "1e-5", "--lr-max", str(args.pose_lr_max),
@@ -110,6 +110,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--stereo-lr", type=float, default=2e-4)
     p.add_argument("--pose-lr-max", type=float, default=1e-3)
     p.add_argument("--target-weight", type=float, default=4.0)
+    p.add_argument("--edge-weight", type=float, default=3.0, help="train-stereo --edge-weight (session 6's recipe)")
     p.add_argument("--time-limit-s", type=float, default=360.0, help="wall-clock limit of each training process")
     p.add_argument("--val-every", type=int, default=1000)
     p.add_argument("--seed", type=int, default=0)
