@@ -4,9 +4,10 @@ Metrics (paper §5.1) over *target pixels* (``mask & gt > 0``) of full test fram
 bad-3 (%) and D1 (%, error > 3 px and > 5 % of GT). Aggregated pixel-weighted — as if all target
 pixels of all frames were one set — overall, per illumination regime and per distance bin (z of t:
 10-20, 20-30, 30-40, 40-50 m), and split by region: ``region:silhouette`` (target pixels within
-:data:`SILHOUETTE_RADIUS` px of a non-target pixel, where a coarse-to-fine network blurs the outline into
-the background) and ``region:interior`` (the rest). A pixel with no estimate (SGBM invalid, outside our window) counts
-with disparity 0, i.e. as an error; the density of each method is reported next to it.
+:data:`SILHOUETTE_RADIUS` px of a non-target pixel, where a coarse-to-fine network blurs the outline
+into the background) and ``region:interior`` (the rest). A pixel with no estimate (SGBM invalid,
+outside our window) counts with disparity 0, i.e. as an error; the density of each method is
+reported next to it.
 
 Classical baseline: ``cv2.StereoSGBM`` in ``MODE_SGBM_3WAY`` on the grey images with
 :data:`SGBM_DEFAULTS` (P1 = 8·bs², P2 = 32·bs² for one channel, per the OpenCV docs) and

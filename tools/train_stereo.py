@@ -26,6 +26,7 @@ import torch
 
 from spacepose.errors import DatasetError, SpaceposeError
 from spacepose.models.stereo_config import StereoConfig
+from spacepose.models.stereo_loss import pixel_weights
 from spacepose.tools import training_common as tc
 from spacepose.tools.stereo_data import StereoCropConfig, StereoCropDataset
 from spacepose.tools.training_common import CHECKPOINT_NAME, EpochSampler, git_commit
@@ -209,8 +210,6 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         left, right = batch["left"].to(device), batch["right"].to(device)
         gt, valid = batch["disparity"].to(device), batch["valid"].to(device)
         init_disp, preds = net(left, right, iters=cfg.iters)
-        from spacepose.models.stereo_loss import pixel_weights
-
         weight = pixel_weights(batch["target"].to(device), cfg.target_weight, cfg.edge_weight, cfg.edge_radius)
         loss, metrics = _sequence_loss(init_disp, preds, gt, valid, stereo_cfg.max_disp, weight)
         optimizer.zero_grad(set_to_none=True)
