@@ -69,3 +69,18 @@ def test_silhouette_band():
     assert sq[:2].all() and sq[-2:].all() and sq[:, :2].all() and sq[:, -2:].all() and not sq[2:6, 2:6].any()
     full = np.ones((6, 6), bool)
     assert not silhouette_band(full, 1).any()  # the image border is not background
+
+
+def test_silhouette_band_is_the_one_training_weighs():
+    """eval-stereo's region:silhouette rows measure the band that train-stereo --edge-weight weighs."""
+    torch = pytest.importorskip("torch")
+    from spacepose.models.stereo_loss import silhouette_band as train_band
+    from spacepose.tools.eval_stereo import SILHOUETTE_RADIUS, silhouette_band
+    from spacepose.tools.train_stereo import TrainConfig
+
+    assert TrainConfig(dataset="d", out="o").edge_radius == SILHOUETTE_RADIUS
+    rng = np.random.default_rng(3)
+    for radius in (1, SILHOUETTE_RADIUS):
+        valid = rng.random((40, 50)) < 0.7
+        want = train_band(torch.from_numpy(valid)[None, None], radius)[0, 0].numpy()
+        np.testing.assert_array_equal(silhouette_band(valid, radius), want)
