@@ -16,7 +16,9 @@ A bundle is a folder::
                  "centre": [x, y, z],
                  "radius": 3.03,                       # bounding-sphere radius about "centre", metres
                  "bbox_min": [x, y, z], "bbox_max": [x, y, z],
-                 "surface_points": [[x, y, z], ...]},  # optional (S, 3), for ICP refinement
+                 "surface_points": [[x, y, z], ...],   # optional (S, 3), for ICP refinement
+                 "surface_normals": [[x, y, z], ...]}, # optional (S, 3) unit normals of those
+                                                       # (PCA normals of the samples if absent)
       "stereo": {"file": "stereo.onnx", "input_size": [256, 256], "iters": 8,
                  "normalisation": "rgb_0_255", "max_disp": 192,
                  "disparity_range_px": [lo, hi],       # optional: disparities (graph input px) seen
@@ -33,6 +35,9 @@ A bundle is a folder::
                  "min_points": 64, "min_cluster_fraction": 0.3,
                  "min_keypoint_fraction": 0.3, "max_fit_rms_factor": 1.0,
                  "seg_threshold": 0.5, "depth_margin": 0.2},   # all optional (defaults here)
+      "registration": {"starts": 48, "min_margin": 0.01, ...},   # optional: multi-start ICP of the
+                                       # surface to the stereo points decides the pose (its fields:
+                                       # spacepose.registration.RegistrationConfig); absent: off
       "rig": {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0},
       "distance_range_m": [10.0, 50.0],
       "dataset": {"seed": 0, "size": 10000},
@@ -63,6 +68,7 @@ import numpy as np
 
 from .errors import BundleError
 from .pose_inputs import PoseInputSpec
+from .registration import RegistrationConfig
 
 __all__ = [
     "SCHEMA",
@@ -185,7 +191,9 @@ class ModelBundle:
         target_name, mesh_scale: which target and how its mesh was scaled (metres per mesh unit).
         keypoints: (M, 3) float64 object-frame keypoints; ``centre`` (3,) the object-frame centre.
         radius: bounding-sphere radius about ``centre`` (m); ``bbox_min``/``bbox_max`` (3,) the
-            object-frame bounding box (overlays, ICP sanity); ``surface_points`` (S, 3), maybe empty.
+            object-frame bounding box (overlays, ICP sanity); ``surface_points`` (S, 3), maybe empty,
+            and ``surface_normals`` (S, 3) their normals (empty when the manifest has none).
+        registration: multi-start registration settings, ``None`` when the bundle does not use it.
         stereo, pose, voting: graph and voting configs; ``rig``: the training rig.
         distance_range_m: (near, far) target distance the graphs were trained for.
         dataset_seed, dataset_size, training_commit, metrics: provenance and measured numbers.
@@ -201,6 +209,7 @@ class ModelBundle:
     bbox_min: np.ndarray
     bbox_max: np.ndarray
     surface_points: np.ndarray
+    surface_normals: np.ndarray
     stereo: StereoGraphConfig
     pose: PoseGraphConfig
     voting: VotingConfig
@@ -210,6 +219,7 @@ class ModelBundle:
     dataset_size: int | None
     training_commit: str
     metrics: Mapping[str, Any] = field(default_factory=dict)
+    registration: RegistrationConfig | None = None
     graph_metadata: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     @property
@@ -457,6 +467,33 @@ def _parse_voting(section: Any) -> VotingConfig:
     return VotingConfig(**values)
 
 
+def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | None:
+    if section is None:
+        return None
+    if not isinstance(section, Mapping):
+        raise BundleError(f"bundle.json: registration must be an object, got {type(section).__name__}")
+    if n_surface < 12:
+        raise BundleError("bundle.json: registration needs target.surface_points (at least 12)")
+    data = _optional_fields(RegistrationConfig, section, "registration")
+    defaults = RegistrationConfig()
+    values: dict[str, Any] = {}
+    for name in RegistrationConfig.__dataclass_fields__:
+        default, value, where = getattr(defaults, name), data.get(name, getattr(defaults, name)), f"registration.{name}"
+        if isinstance(default, int):
+            value = _integer(value, where, minimum=0 if name == "seed" else 1)
+        else:
+            value = _number(value, where, positive=name not in ("min_margin", "min_inlier_fraction"))
+        values[name] = value
+    if not 0.0 <= values["min_inlier_fraction"] <= 1.0:
+        raise BundleError(f"bundle.json: registration.min_inlier_fraction must be in [0, 1], "
+                          f"got {values['min_inlier_fraction']!r}")
+    if not 0.0 <= values["min_margin"] < 1.0:
+        raise BundleError(f"bundle.json: registration.min_margin must be in [0, 1), got {values['min_margin']!r}")
+    if not 0.0 < values["reach_decay"] <= 1.0:
+        raise BundleError(f"bundle.json: registration.reach_decay must be in (0, 1], got {values['reach_decay']!r}")
+    return RegistrationConfig(**values)
+
+
 def _parse_manifest(data: Any, path: Path) -> ModelBundle:
     if not isinstance(data, dict):
         raise BundleError(f"bundle.json must hold an object, got {type(data).__name__}")
@@ -473,6 +510,10 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         raise BundleError("bundle.json: target.bbox_max must exceed target.bbox_min on every axis")
     surface = target.get("surface_points")
     surface = np.zeros((0, 3)) if surface is None else _vector(surface, "target.surface_points", (None, 3))
+    normals = target.get("surface_normals")
+    normals = np.zeros((0, 3)) if normals is None else _vector(normals, "target.surface_normals", (len(surface), 3))
+    if len(normals) and not np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-2):
+        raise BundleError("bundle.json: target.surface_normals must be unit vectors")
     pose = _parse_pose(_get(data, "pose", ""))
     if pose.n_keypoints != keypoints.shape[0]:
         raise BundleError(f"bundle.json: pose.n_keypoints={pose.n_keypoints} but target.keypoints holds "
@@ -492,6 +533,7 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         bbox_min=_frozen(bbox_min),
         bbox_max=_frozen(bbox_max),
         surface_points=_frozen(surface),
+        surface_normals=_frozen(normals),
         stereo=_parse_stereo(_get(data, "stereo", "")),
         pose=pose,
         voting=_parse_voting(data.get("voting")),
@@ -505,6 +547,7 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         dataset_size=dataset.get("size"),
         training_commit=str(data.get("training_commit", "unknown")),
         metrics=metrics,
+        registration=_parse_registration(data.get("registration"), len(surface)),
     )
 
 

@@ -41,11 +41,12 @@ import numpy as np
 from . import roi
 from .bundle import ModelBundle, load_bundle
 from .errors import ShapeError
-from .flip import resolve_flip
+from .flip import flipped_pose, resolve_flip
 from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
+from .registration import SurfaceModel, register
 
 __all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
 
@@ -192,6 +193,12 @@ def refine_icp(R: np.ndarray, t: np.ndarray, scene: np.ndarray, model: np.ndarra
     return R, t
 
 
+def _stage_invalid(stage: PoseStageResult, status: str, factors: dict[str, float] | None = None) -> PoseStageResult:
+    """``stage`` marked invalid with ``status`` (pose kept for diagnostics only, confidence 0)."""
+    return dataclasses.replace(stage, valid=False, status=status, confidence=0.0,
+                               factors={**stage.factors, **(factors or {})})
+
+
 def _surface_normals(points: np.ndarray, k: int = 12) -> np.ndarray:
     """PCA normals of surface samples (orientation irrelevant for point-to-plane)."""
     from .pose_inputs import knn_indices
@@ -258,8 +265,12 @@ class PoseEstimator:
 
                 raise BundleError(f"pose graph has no output {name!r} (outputs: {self._pose_outputs})")
         self._spec = self.bundle.pose.input_spec
-        self._surface_normals = (_surface_normals(np.asarray(self.bundle.surface_points))
-                                 if self.refine and len(self.bundle.surface_points) else None)
+        surface = np.asarray(self.bundle.surface_points)
+        wants_normals = (self.refine or self.bundle.registration is not None) and len(surface)
+        self._surface_normals = ((np.asarray(self.bundle.surface_normals) if len(self.bundle.surface_normals)
+                                  else _surface_normals(surface)) if wants_normals else None)
+        self._registration = (SurfaceModel(surface, self._surface_normals)
+                              if self.bundle.registration is not None else None)
         self._lock = threading.Lock()
         self._prior: PoseResult | None = None
 
@@ -368,6 +379,44 @@ class PoseEstimator:
         status, stage, window, detail = outcome
         return self._result(status, timer, stage=stage, window=window, detail=detail)
 
+    def _register(self, xyz: np.ndarray, stage: PoseStageResult) -> tuple[PoseStageResult, str]:
+        """Multi-start registration (:mod:`spacepose.registration`) seeded with the network's pose.
+
+        The registered pose replaces the voted one; its validity is the registration's own
+        (inlier share, margin over the best distinct alternative, the fitted distance in range).
+        Confidence: ``inlier_fraction * (1 - exp(-margin / min_margin))``.
+        """
+        config, bundle = self.bundle.registration, self.bundle
+        axis = bundle.voting.flip_axis
+        seeds = []
+        if np.all(np.isfinite(stage.R)) and np.all(np.isfinite(stage.t)):
+            seeds.append((stage.R, stage.t))
+            if axis:
+                seeds.append(flipped_pose(stage.R, stage.t, bundle.centre, axis))
+        reg = register(xyz, self.K, self.baseline_m, self._registration, bundle.centre, config, seeds=seeds,
+                       flip_axis=axis)
+        if reg is None:
+            return _stage_invalid(stage, "too_few_points"), "too few stereo points to register the target"
+        margin = reg.margin
+        factors = {"registration_score": reg.score, "inliers": reg.inlier_fraction, "flip_margin": margin,
+                   "runner_up_deg": reg.runner_up_angle_deg}
+        lo, hi = depth_window(bundle.distance_range_m, 0.0, bundle.voting.depth_margin)
+        distance = float(np.linalg.norm(reg.t))  # as spacepose.pose_stage judges ||t||
+        if reg.inlier_fraction < config.min_inlier_fraction:
+            return _stage_invalid(stage, "fit_residual", factors), (
+                f"only {reg.inlier_fraction:.0%} of the stereo points lie on the registered surface")
+        if not lo <= distance <= hi:
+            return _stage_invalid(stage, "out_of_range", factors), (
+                f"registered target distance {distance:.1f} m outside {lo:.1f}-{hi:.1f} m")
+        if margin < config.min_margin:
+            return _stage_invalid(stage, "weak_votes", factors), (
+                f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
+                f"(score gap {margin:.4f} < {config.min_margin:.4f})")
+        confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
+        bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
+        return dataclasses.replace(stage, R=reg.R, t=reg.t, valid=True, status="ok", confidence=float(confidence),
+                                   bandwidth=bandwidth, factors={**stage.factors, **factors}), ""
+
     def _pose_from_pair(self, left_r: np.ndarray, right_r: np.ndarray, hint, timer: StageTimer
                         ) -> tuple[str, PoseStageResult | None, roi.Window | None, str]:
         """stereo -> pose_inputs -> pose_net -> voting [-> refine] on a rectified pair.
@@ -403,6 +452,11 @@ class PoseEstimator:
                 distance_range_m=bundle.distance_range_m, focal_px=self.focal_px, baseline_m=self.baseline_m,
                 sigma_d_px=voting.sigma_d_px / max(stereo.scale, 1e-9), offset_sign=bundle.pose.offset_sign,
                 seed=self.seed)
+        if self._registration is not None:
+            with timer.stage("registration"):
+                stage, detail = self._register(xyz, stage)
+            if not stage.valid:  # the invalid stage still carries its diagnostics (flip_margin)
+                return stage.status, stage, stereo.window, detail
         refine = None
         if stage.valid and self.refine and self._surface_normals is not None:
             surface, normals, reach = np.asarray(bundle.surface_points), self._surface_normals, 2.0 * stage.bandwidth
@@ -415,7 +469,7 @@ class PoseEstimator:
                     R, t = refine(stage.R, stage.t)
                 stage = dataclasses.replace(stage, R=R, t=t)
         fitness = None
-        if stage.valid and voting.flip_axis and len(bundle.surface_points):
+        if stage.valid and voting.flip_axis and len(bundle.surface_points) and self._registration is None:
             with timer.stage("refine" if refine is not None else "verify"):
                 flip = resolve_flip(stage.R, stage.t, xyz, np.asarray(bundle.surface_points), bundle.centre,
                                     voting.flip_axis, stage.bandwidth, refine=refine)
