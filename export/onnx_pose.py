@@ -129,10 +129,10 @@ def parity_check(model: nn.Module, onnx_path: str | os.PathLike, *, seed: int = 
     return diffs
 
 
-def target_geometry(target: str, centre: np.ndarray, n_surface: int = 2000, seed: int = 0) -> dict[str, Any]:
+def target_geometry(target: str, centre: np.ndarray, n_surface: int = 6000, seed: int = 0) -> dict[str, Any]:
     """``mesh_scale``, ``radius`` (about ``centre``), ``bbox_min``/``bbox_max`` and ``n_surface``
-    area-uniform ``surface_points`` (seeded; for the runtime's surface-fitness check and ICP) of a
-    shipped target mesh."""
+    area-uniform ``surface_points`` with their faces' unit ``surface_normals`` (seeded; for the
+    runtime's surface checks, ICP and :mod:`spacepose.registration`) of a shipped target mesh."""
     import trimesh
 
     from spacepose.tools.targets import load_target
@@ -141,9 +141,12 @@ def target_geometry(target: str, centre: np.ndarray, n_surface: int = 2000, seed
     verts = np.asarray(tg.mesh.vertices, dtype=np.float64)
     lo, hi = verts.min(axis=0), verts.max(axis=0)
     radius = float(np.max(np.linalg.norm(verts - np.asarray(centre, dtype=np.float64), axis=1)))
-    surface, _ = trimesh.sample.sample_surface(tg.mesh, int(n_surface), seed=int(seed))
+    surface, faces = trimesh.sample.sample_surface(tg.mesh, int(n_surface), seed=int(seed))
+    normals = np.asarray(tg.mesh.face_normals, dtype=np.float64)[faces]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     return {"mesh_scale": float(tg.scale), "radius": radius, "bbox_min": lo.tolist(), "bbox_max": hi.tolist(),
-            "surface_points": np.round(np.asarray(surface, dtype=np.float64), 4).tolist()}
+            "surface_points": np.round(np.asarray(surface, dtype=np.float64), 4).tolist(),
+            "surface_normals": np.round(normals, 5).tolist()}
 
 
 def write_pose_manifest(bundle_dir: str | os.PathLike, *, net_config: PoseNetConfig, keypoints: np.ndarray,

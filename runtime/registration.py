@@ -142,6 +142,7 @@ class SurfaceLookup:
         self.origin = self.points.min(axis=0) - self.reach
         self.shape = tuple(int(v) for v in np.ceil((self.points.max(axis=0) + self.reach - self.origin) / self.cell) + 1)
         self.grid = self._fill()
+        self._flat = self.grid.reshape(-1)
 
     def _fill(self) -> np.ndarray:
         r = int(math.ceil(self.reach / self.cell))
@@ -174,11 +175,15 @@ class SurfaceLookup:
 
     def query(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(..., 3) object-frame points -> (index (...,) int64, -1 for none; distance (...,), inf for none)."""
-        cells = np.round((X - self.origin) / self.cell).astype(np.int64)
-        inside = np.all((cells >= 0) & (cells < np.array(self.shape)), axis=-1)
-        cells = np.where(inside[..., None], cells, 0)
-        idx = np.where(inside, self.grid[cells[..., 0], cells[..., 1], cells[..., 2]], -1)
-        dist = np.linalg.norm(X - self.points[np.maximum(idx, 0)], axis=-1)
+        cells = np.rint((X - self.origin) * (1.0 / self.cell)).astype(np.int64)
+        s0, s1, s2 = self.shape
+        inside = ((cells[..., 0] >= 0) & (cells[..., 0] < s0) & (cells[..., 1] >= 0) & (cells[..., 1] < s1)
+                  & (cells[..., 2] >= 0) & (cells[..., 2] < s2))
+        flat = (cells[..., 0] * s1 + cells[..., 1]) * s2 + cells[..., 2]
+        idx = self._flat[np.where(inside, flat, 0)]
+        idx[~inside] = -1
+        diff = X - self.points[np.maximum(idx, 0)]
+        dist = np.sqrt(np.einsum("...i,...i->...", diff, diff))
         return idx, np.where(idx >= 0, dist, np.inf)
 
 
@@ -191,9 +196,9 @@ class SurfaceModel:
     bounding-box side.
     """
 
-    def __init__(self, points: np.ndarray, normals: np.ndarray, *, coarse_cell_m: float = 0.2,
-                 coarse_reach_m: float = 2.0, coarse_stride: int = 5, fine_cell_m: float = 0.05,
-                 fine_reach_m: float = 0.3) -> None:
+    def __init__(self, points: np.ndarray, normals: np.ndarray, *, coarse_cell_m: float = 0.25,
+                 coarse_reach_m: float = 2.0, coarse_stride: int = 10, fine_cell_m: float = 0.05,
+                 fine_reach_m: float = 0.2) -> None:
         check_shape(points, (None, 3), "points")
         check_shape(normals, (len(points), 3), "normals")
         if len(points) < 12:
@@ -250,13 +255,14 @@ def _icp(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, reach
          ) -> tuple[np.ndarray, np.ndarray]:
     """Batched point-to-plane ICP of K poses (K, 3, 3), (K, 3) to the points P (N, 3)."""
     for reach in reaches:
-        X = np.einsum("kni,kij->knj", P[None] - t[:, None, :], R)           # R^T (P - t), (K, N, 3)
+        X = (P[None] - t[:, None, :]) @ R                                     # R^T (P - t), (K, N, 3)
         q, n, dist = model.query(X, reach)
         w = np.isfinite(dist).astype(np.float64)
         A = np.concatenate([np.cross(X, n), n], axis=-1)                      # (K, N, 6)
         b = np.einsum("kni,kni->kn", n, q - X)
-        H = np.einsum("kni,knj,kn->kij", A, A, w) + 1e-6 * np.eye(6)
-        g = np.einsum("kni,kn,kn->ki", A, b, w)
+        Aw = A * w[..., None]
+        H = np.swapaxes(Aw, 1, 2) @ A + 1e-6 * np.eye(6)
+        g = np.einsum("kni,kn->ki", Aw, b)
         enough = w.sum(axis=1) >= 12
         step = np.linalg.solve(H, g[..., None])[..., 0]
         step[~enough] = 0.0
@@ -326,6 +332,6 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
 
 
 def _scene_cost(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, tau: float) -> np.ndarray:
-    X = np.einsum("kni,kij->knj", P[None] - t[:, None, :], R)
+    X = (P[None] - t[:, None, :]) @ R
     _, _, dist = model.query(X, tau)
     return np.mean(np.minimum(dist, tau) ** 2, axis=1) / tau ** 2

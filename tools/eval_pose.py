@@ -5,7 +5,9 @@ the dataset's frames are independent) sees the raw stereo pair; errors against t
 :mod:`spacepose.metrics` (paper eqs. 32-33: e_t in m, e_R in degrees; ADD in m over model surface
 points; the SPEED score ``||Δt|| / ||t|| + angle`` in rad). Reported over the valid frames, per
 regime and per 10 m distance bin: mean and median e_t / e_R / ADD, mean SPEED score, the valid
-fraction, and the count of valid frames with e_R > 90° ("flips", symmetric-looking targets).
+fraction, and the count of valid frames with e_R > 90° ("flips", symmetric-looking targets);
+``e_R_sym``: e_R to the nearer of the label and its 180° flip about the bundle's ``voting.flip_axis``
+(how good the orientation is up to that near-symmetry; equal to e_R without a flip axis).
 Also: an error-vs-confidence table (quantile bins of confidence), Fig. 14-style scatter plots
 (e_t and e_R against distance) and Fig. 15-style overlays (projected 3-D box; white = GT, green =
 estimate). ``baseline="classical"`` adds :func:`spacepose.tools.classical_pose.estimate_classical`
@@ -70,8 +72,8 @@ def summarise(rows: Iterable[dict[str, Any]]) -> dict[str, Any]:
     rows = list(rows)
     ok = [r for r in rows if r["valid"]]
     out: dict[str, Any] = {"frames": len(rows), "valid": len(ok), "valid_fraction": len(ok) / len(rows) if rows else float("nan")}
-    for key in ("e_t", "e_R", "add"):
-        vals = [r[key] for r in ok]
+    for key in ("e_t", "e_R", "e_R_sym", "add"):
+        vals = [r[key] for r in ok if key in r]
         out[f"{key}_mean"] = _nanstat(np.mean, vals)
         out[f"{key}_median"] = _nanstat(np.median, vals)
     out["speed_score"] = _nanstat(np.mean, [r["speed"] for r in ok])
@@ -184,6 +186,10 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
     model = load_bundle(bundle)
     estimator = PoseEstimator(rig, bundle=model, threads=threads, use_prior=False, seed=seed, refine=refine)
     pts = model_points(model.target_name, np.vstack([model.keypoints, model.bbox_corners]))
+    from spacepose.flip import flip_matrix
+    from spacepose.metrics import rotation_error_deg
+
+    flip_S = flip_matrix(model.voting.flip_axis) if model.voting.flip_axis else np.eye(3)
     classical: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, bool]] | None = None
     rect = rectify(rig)
     K = rect.K
@@ -204,7 +210,8 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
         overlay_dir.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
     base_rows: list[dict[str, Any]] = []
-    nan_err = {"e_t": float("nan"), "e_R": float("nan"), "add": float("nan"), "speed": float("nan")}
+    nan_err = {"e_t": float("nan"), "e_R": float("nan"), "add": float("nan"), "speed": float("nan"),
+               "e_R_sym": float("nan")}
     for i, rec in enumerate(records):
         left = read_image(root / "left" / f"{rec.frame}.png")
         right = read_image(root / "right" / f"{rec.frame}.png")
@@ -212,6 +219,9 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
         result = estimator.estimate(left, right)
         wall = (time.perf_counter() - t0) * 1e3
         err = _errors(rec.R, rec.t, result.R, result.t, pts) if result.valid else dict(nan_err)
+        # up to the target's declared near-symmetry: the nearer of the label and its 180° flip
+        err["e_R_sym"] = (min(err["e_R"], rotation_error_deg(rec.R @ flip_S, result.R)) if result.valid
+                          else float("nan"))
         row = {"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "valid": bool(result.valid),
                "status": result.status, "confidence": float(result.confidence), "wall_ms": wall, **err,
                "flip_margin": float(result.flip_margin),
@@ -243,7 +253,8 @@ def _fmt(v: Any) -> str:
 
 def format_tables(report: dict[str, Any]) -> str:
     """Markdown tables: per group (overall, regimes, distance bins) and error vs confidence."""
-    cols = ["frames", "valid_fraction", "e_t_mean", "e_t_median", "e_R_mean", "e_R_median", "add_mean", "speed_score", "flips"]
+    cols = ["frames", "valid_fraction", "e_t_mean", "e_t_median", "e_R_mean", "e_R_median", "e_R_sym_median", "add_mean",
+            "speed_score", "flips"]
     lines = []
     for name in ("ours", "baseline"):
         block = report.get(name)
@@ -254,7 +265,7 @@ def format_tables(report: dict[str, Any]) -> str:
         for group, stats in block.items():
             if group == "confidence":
                 continue
-            lines.append(f"| {group} | " + " | ".join(_fmt(stats[c]) for c in cols) + " |")
+            lines.append(f"| {group} | " + " | ".join(_fmt(stats.get(c, float("nan"))) for c in cols) + " |")
         lines.append("")
         if block.get("confidence"):
             ccols = ["confidence_min", "confidence_max", "frames", "e_t_median", "e_R_median", "flips"]

@@ -34,6 +34,10 @@ class TestAggregation:
         assert s["statuses"] == {"ok": 3, "weak_votes": 1}
         empty = summarise([row(valid=False)])
         assert empty["valid"] == 0 and np.isnan(empty["e_t_mean"])
+        # e_R up to the declared flip: the flipped pose counts by its distance to the label's flip
+        sym = summarise([dict(row(e_R=179.0), e_R_sym=1.0), dict(row(e_R=3.0), e_R_sym=3.0)])
+        assert sym["e_R_sym_median"] == pytest.approx(2.0) and sym["flips"] == 1
+        assert np.isnan(s["e_R_sym_median"])   # rows without it (a baseline) give NaN, not an error
 
     def test_confidence_table_highest_first(self):
         rows = [row(conf=c, e_t=1.0 - c) for c in np.linspace(0.1, 0.9, 8)] + [row(valid=False, conf=0.0)]
