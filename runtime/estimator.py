@@ -46,7 +46,7 @@ from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
-from .registration import SurfaceModel, register
+from .registration import SurfaceModel, register, select_with_prior
 
 __all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
 
@@ -380,19 +380,27 @@ class PoseEstimator:
         return self._result(status, timer, stage=stage, window=window, detail=detail)
 
     def _register(self, xyz: np.ndarray, stage: PoseStageResult) -> tuple[PoseStageResult, str]:
-        """Multi-start registration (:mod:`spacepose.registration`) seeded with the network's pose.
+        """Multi-start registration (:mod:`spacepose.registration`) seeded with the network's pose
+        (and the previous frame's valid pose, with ``use_prior``), each with its flip.
 
         The registered pose replaces the voted one; its validity is the registration's own
-        (inlier share, margin over the best distinct alternative, the fitted distance in range).
-        Confidence: ``inlier_fraction * (1 - exp(-margin / min_margin))``.
+        (inlier share, the fitted distance in range, margin over the best distinct alternative).
+        Confidence: ``inlier_fraction * (1 - exp(-margin / min_margin))``. A frame whose margin is
+        too small is still valid when the previous frame's valid pose picks exactly one of the two
+        (:func:`spacepose.registration.select_with_prior`): "tracked", confidence
+        ``0.5 * inlier_fraction``. A conclusive frame ignores the prior, so frames that are not a
+        sequence lose nothing: an unrelated previous pose lies within the tracking gates of one of the
+        two candidates only by rare chance (both 20° and 1 m by default).
         """
         config, bundle = self.bundle.registration, self.bundle
         axis = bundle.voting.flip_axis
+        prior = self._valid_prior()
         seeds = []
-        if np.all(np.isfinite(stage.R)) and np.all(np.isfinite(stage.t)):
-            seeds.append((stage.R, stage.t))
-            if axis:
-                seeds.append(flipped_pose(stage.R, stage.t, bundle.centre, axis))
+        for R_s, t_s in ((stage.R, stage.t), prior or (None, None)):
+            if R_s is not None and np.all(np.isfinite(R_s)) and np.all(np.isfinite(t_s)):
+                seeds.append((R_s, t_s))
+                if axis:
+                    seeds.append(flipped_pose(R_s, t_s, bundle.centre, axis))
         reg = register(xyz, self.K, self.baseline_m, self._registration, bundle.centre, config, seeds=seeds,
                        flip_axis=axis)
         if reg is None:
@@ -408,14 +416,31 @@ class PoseEstimator:
         if not lo <= distance <= hi:
             return _stage_invalid(stage, "out_of_range", factors), (
                 f"registered target distance {distance:.1f} m outside {lo:.1f}-{hi:.1f} m")
+        R, t = reg.R, reg.t
+        tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
         if margin < config.min_margin:
-            return _stage_invalid(stage, "weak_votes", factors), (
-                f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
-                f"(score gap {margin:.4f} < {config.min_margin:.4f})")
-        confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
+            if tracked is None:
+                return _stage_invalid(stage, "weak_votes", factors), (
+                    f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
+                    f"(score gap {margin:.4f} < {config.min_margin:.4f})"
+                    + ("" if prior is None else "; the previous pose does not pick one"))
+            (R, t), confidence = tracked, 0.5 * reg.inlier_fraction
+            factors["tracked"] = 1.0
+        else:  # conclusive on its own: the prior is not needed (and frames need not be a sequence)
+            confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
-        return dataclasses.replace(stage, R=reg.R, t=reg.t, valid=True, status="ok", confidence=float(confidence),
+        return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),
                                    bandwidth=bandwidth, factors={**stage.factors, **factors}), ""
+
+    def _valid_prior(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The previous frame's pose when it was valid and ``use_prior`` is on, else ``None``."""
+        if not self.use_prior:
+            return None
+        with self._lock:
+            prior = self._prior
+        if prior is None or not prior.valid:
+            return None
+        return np.asarray(prior.R), np.asarray(prior.t)
 
     def _pose_from_pair(self, left_r: np.ndarray, right_r: np.ndarray, hint, timer: StageTimer
                         ) -> tuple[str, PoseStageResult | None, roi.Window | None, str]:

@@ -29,6 +29,7 @@ import numpy as np
 from .errors import check_shape
 
 __all__ = ["RegistrationConfig", "SurfaceLookup", "SurfaceModel", "RegistrationResult", "start_rotations", "register",
+           "select_with_prior",
            "rotation_angle_deg"]
 
 
@@ -49,6 +50,10 @@ class RegistrationConfig:
         data do not say which of the two poses it is (``weak_votes``).
     min_inlier_fraction: least share of the stereo points within ``tau`` of the surface at the
         kept pose (``fit_residual`` below it).
+    track_max_deg, track_max_m: with a valid pose of the previous frame (the estimator's prior), a
+        frame whose margin is too small is still decided when exactly one of the best pose and its
+        runner-up lies within this rotation and translation of that prior (:func:`select_with_prior`):
+        the target cannot have turned half round between two frames.
     """
 
     starts: int = 48
@@ -66,6 +71,8 @@ class RegistrationConfig:
     seed: int = 0
     min_margin: float = 0.01
     min_inlier_fraction: float = 0.5
+    track_max_deg: float = 20.0
+    track_max_m: float = 1.0
 
 
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
@@ -231,7 +238,8 @@ class RegistrationResult:
     """Outcome of :func:`register`.
 
     R, t: the best pose (``X_cam = R X_obj + t``). score: its score (module docstring). runner_up_score: the best score of a pose more than ``distinct_deg`` away
-    (inf when every start converged to the same pose). runner_up_angle_deg: how far that pose is.
+    (inf when every start converged to the same pose), ``runner_up_R``/``runner_up_t`` that pose (NaN
+    without one) and ``runner_up_angle_deg`` how far it is from the best.
     inlier_fraction: stereo points within ``tau`` of the surface at the best pose. tau_m: the
     frame's depth tolerance. starts: poses tried.
     """
@@ -241,6 +249,8 @@ class RegistrationResult:
     score: float
     runner_up_score: float
     runner_up_angle_deg: float
+    runner_up_R: np.ndarray
+    runner_up_t: np.ndarray
     inlier_fraction: float
     tau_m: float
     starts: int
@@ -323,12 +333,31 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
     best = int(np.argmin(score))
     angles = rotation_angle_deg(R[best][None], R)
     distinct = angles > config.distinct_deg
-    runner = float(score[distinct].min()) if distinct.any() else float("inf")
-    runner_angle = float(angles[distinct][np.argmin(score[distinct])]) if distinct.any() else 0.0
+    if distinct.any():
+        k_run = int(np.flatnonzero(distinct)[np.argmin(score[distinct])])
+        runner, runner_angle, R_run, t_run = float(score[k_run]), float(angles[k_run]), R[k_run], t[k_run]
+    else:
+        runner, runner_angle, R_run, t_run = float("inf"), 0.0, np.full((3, 3), np.nan), np.full(3, np.nan)
     X = (P - t[best]) @ R[best]
     _, _, dist = model.query(X, tau)
     return RegistrationResult(R=R[best], t=t[best], score=float(score[best]), runner_up_score=runner, runner_up_angle_deg=runner_angle,
+                              runner_up_R=R_run, runner_up_t=t_run,
                               inlier_fraction=float(np.mean(dist < tau)), tau_m=float(tau), starts=len(R0))
+
+
+def select_with_prior(result: RegistrationResult, R_prior: np.ndarray, t_prior: np.ndarray,
+                      config: RegistrationConfig) -> tuple[np.ndarray, np.ndarray] | None:
+    """Of the best pose and its runner-up, the one a previous frame's pose ``(R_prior, t_prior)``
+    supports: within ``config.track_max_deg`` and ``config.track_max_m`` of it. ``None`` when
+    neither or both are (the prior does not decide)."""
+    near = []
+    for R, t in ((result.R, result.t), (result.runner_up_R, result.runner_up_t)):
+        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+            continue
+        if (float(rotation_angle_deg(R_prior, R)) <= config.track_max_deg
+                and float(np.linalg.norm(np.asarray(t) - np.asarray(t_prior))) <= config.track_max_m):
+            near.append((R, t))
+    return near[0] if len(near) == 1 else None
 
 
 def _scene_cost(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, tau: float) -> np.ndarray:

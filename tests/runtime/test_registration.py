@@ -220,3 +220,55 @@ def test_estimator_registers_and_reports_an_ambiguous_pose_invalid(tmp_path):
     res = strict.estimate(left, right)
     assert not res.valid and res.status == "weak_votes" and "fits the stereo points almost as well" in res.detail
     assert np.isfinite(res.flip_margin) and np.all(np.isnan(res.R))
+
+
+def _result(R, t, R_run, t_run):
+    from spacepose.registration import RegistrationResult
+
+    return RegistrationResult(R=R, t=t, score=0.1, runner_up_score=0.101, runner_up_angle_deg=180.0,
+                              runner_up_R=R_run, runner_up_t=t_run, inlier_fraction=0.9, tau_m=0.2, starts=10)
+
+
+def test_select_with_prior_picks_the_candidate_the_previous_pose_supports():
+    from spacepose.registration import select_with_prior
+
+    cfg = RegistrationConfig()
+    R = Rotation.from_euler("xyz", [20, 30, 40], degrees=True).as_matrix()
+    t = np.array([1.0, 0.0, 20.0])
+    R_f, t_f = flipped_pose(R, t, np.array([0, 0, 0.35]), "z")
+    res = _result(R, t, R_f, t_f)
+    turned = Rotation.from_euler("z", 8, degrees=True).as_matrix()
+    picked = select_with_prior(res, turned @ R, t + 0.3, cfg)           # prior near the best
+    assert picked is not None and picked[0] is R
+    picked = select_with_prior(res, turned @ R_f, t_f - 0.3, cfg)       # prior near the runner-up
+    assert picked is not None and picked[0] is R_f
+    assert select_with_prior(res, Rotation.from_euler("x", 90, degrees=True).as_matrix() @ R, t, cfg) is None
+    assert select_with_prior(res, R, t + np.array([0, 0, 5.0]), cfg) is None   # moved too far
+    both = _result(R, t, turned @ R, t)                                 # both near: the prior cannot decide
+    assert select_with_prior(both, R, t, cfg) is None
+    lone = _result(R, t, np.full((3, 3), np.nan), np.full(3, np.nan))   # no runner-up at all
+    assert select_with_prior(lone, R, t, cfg)[0] is R
+
+
+def test_estimator_tracks_an_ambiguous_frame_from_the_previous_valid_pose(tmp_path):
+    import dataclasses
+
+    left, right = synthetic_pair()
+    loose = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(_registration_bundle(tmp_path, {"min_margin": 0.0})),
+                          threads=1)
+    first = loose.estimate(left, right)
+    assert first.valid
+    strict = PoseEstimator(paper_rig(640, 480),
+                           bundle=load_bundle(_registration_bundle(tmp_path / "s", {"min_margin": 0.5})), threads=1)
+    strict._prior = first                                   # as if the previous frame had given it
+    res = strict.estimate(left, right)
+    assert res.valid and res.status == "ok"
+    assert rotation_error_deg(first.R, res.R) < 5.0 and np.linalg.norm(first.t - res.t) < 0.3
+    assert res.confidence <= 0.5
+    # an invalid previous frame, or use_prior off, gives no prior: the frame stays undecided
+    strict._prior = dataclasses.replace(first, valid=False)
+    assert strict.estimate(left, right).status == "weak_votes"
+    off = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(_registration_bundle(tmp_path / "o", {"min_margin": 0.5})),
+                        threads=1, use_prior=False)
+    off._prior = first
+    assert off.estimate(left, right).status == "weak_votes"
