@@ -79,7 +79,10 @@ class PoseResult:
         detail: a human-readable reason for an invalid result ("" when valid).
         flip_margin: with the bundle's ``voting.flip_axis``, how much more of the stereo points the
             kept pose holds than its 180° flip (surface fitness gap, :mod:`spacepose.flip`); NaN when
-            that check did not run. Not part of the JSON line.
+            that check did not run. With the bundle's ``registration``: the score gap between the
+            registered pose and its runner-up (:mod:`spacepose.registration`). Not part of the JSON line.
+        depth_tolerance_m: the registration's depth tolerance ``tau`` for this frame (NaN without
+            registration). Not part of the JSON line.
     """
 
     R: np.ndarray
@@ -94,6 +97,7 @@ class PoseResult:
     roi: tuple[int, int, int, int] | None = None
     detail: str = ""
     flip_margin: float = float("nan")
+    depth_tolerance_m: float = float("nan")
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -348,7 +352,9 @@ class PoseEstimator:
                             n_points=0 if stage is None else int(stage.n_inliers),
                             roi=None if window is None else window.bbox, detail=detail,
                             flip_margin=float("nan") if stage is None else float(
-                                stage.factors.get("flip_margin", float("nan"))))
+                                stage.factors.get("flip_margin", float("nan"))),
+                            depth_tolerance_m=float("nan") if stage is None else float(
+                                stage.factors.get("depth_tolerance_m", float("nan"))))
         if status != "bad_input":  # a bad frame says nothing about where the target is
             with self._lock:
                 self._prior = result
@@ -379,7 +385,7 @@ class PoseEstimator:
         status, stage, window, detail = outcome
         return self._result(status, timer, stage=stage, window=window, detail=detail)
 
-    def _register(self, xyz: np.ndarray, stage: PoseStageResult) -> tuple[PoseStageResult, str]:
+    def _register(self, xyz: np.ndarray, stage: PoseStageResult, stereo_scale: float) -> tuple[PoseStageResult, str]:
         """Multi-start registration (:mod:`spacepose.registration`) seeded with the network's pose
         (and the previous frame's valid pose, with ``use_prior``), each with its flip.
 
@@ -402,12 +408,12 @@ class PoseEstimator:
                 if axis:
                     seeds.append(flipped_pose(R_s, t_s, bundle.centre, axis))
         reg = register(xyz, self.K, self.baseline_m, self._registration, bundle.centre, config, seeds=seeds,
-                       flip_axis=axis)
+                       flip_axis=axis, sigma_d_px=config.sigma_d_px / max(stereo_scale, 1e-9))
         if reg is None:
             return _stage_invalid(stage, "too_few_points"), "too few stereo points to register the target"
         margin = reg.margin
         factors = {"registration_score": reg.score, "inliers": reg.inlier_fraction, "flip_margin": margin,
-                   "runner_up_deg": reg.runner_up_angle_deg}
+                   "runner_up_deg": reg.runner_up_angle_deg, "depth_tolerance_m": reg.tau_m}
         lo, hi = depth_window(bundle.distance_range_m, 0.0, bundle.voting.depth_margin)
         distance = float(np.linalg.norm(reg.t))  # as spacepose.pose_stage judges ||t||
         if reg.inlier_fraction < config.min_inlier_fraction:
@@ -418,12 +424,14 @@ class PoseEstimator:
                 f"registered target distance {distance:.1f} m outside {lo:.1f}-{hi:.1f} m")
         R, t = reg.R, reg.t
         tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
-        if margin < config.min_margin:
+        if margin < config.min_margin or reg.tau_m > config.max_tau_m:
             if tracked is None:
+                why = (f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
+                       f"(score gap {margin:.4f} < {config.min_margin:.4f})" if margin < config.min_margin else
+                       f"the stereo depth (tolerance {reg.tau_m:.2f} m > {config.max_tau_m:.2f} m) is too coarse "
+                       "to tell the pose from its flip")
                 return _stage_invalid(stage, "weak_votes", factors), (
-                    f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
-                    f"(score gap {margin:.4f} < {config.min_margin:.4f})"
-                    + ("" if prior is None else "; the previous pose does not pick one"))
+                    why + ("" if prior is None else "; the previous pose does not pick one"))
             (R, t), confidence = tracked, 0.5 * reg.inlier_fraction
             factors["tracked"] = 1.0
         else:  # conclusive on its own: the prior is not needed (and frames need not be a sequence)
@@ -479,7 +487,7 @@ class PoseEstimator:
                 seed=self.seed)
         if self._registration is not None:
             with timer.stage("registration"):
-                stage, detail = self._register(xyz, stage)
+                stage, detail = self._register(xyz, stage, stereo.scale)
             if not stage.valid:  # the invalid stage still carries its diagnostics (flip_margin)
                 return stage.status, stage, stereo.window, detail
         refine = None

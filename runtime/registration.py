@@ -44,12 +44,18 @@ class RegistrationConfig:
     refine_top, fine_iterations: the best ``refine_top`` starts after the coarse iterations get
         ``fine_iterations`` more on ``max_points`` stereo points; they are scored on those.
     max_points, coarse_points: stereo points used (fixed-seed subsamples).
-    sigma_d_px: disparity noise (pixels of the disparity map) behind ``tau = max(tau_min_m, Z^2 sigma_d / (f B))``.
+    sigma_d_px: disparity noise in stereo-graph input pixels behind the frame's depth tolerance
+        ``tau = max(tau_min_m, Z^2 sigma_d / (f B))`` (the estimator divides it by the window's
+        scale, net px per full-frame px, to get pixels of ``f``).
     distinct_deg: an alternative pose counts as distinct beyond this orientation difference.
     min_margin: least ``margin`` (runner-up score minus best score) for a valid pose: below it the
         data do not say which of the two poses it is (``weak_votes``).
     min_inlier_fraction: least share of the stereo points within ``tau`` of the surface at the
         kept pose (``fit_residual`` below it).
+    max_tau_m: the largest depth tolerance at which a margin can decide the pose. The target's flip
+        about its near-symmetry axis moves only small parts of it (on ``tdrs`` 4 % of the surface, by
+        0.4-0.9 m), so with a coarser depth the margin measures the noise, not the target: beyond it
+        a frame is undecided whatever its margin (tracking may still decide it).
     track_max_deg, track_max_m: with a valid pose of the previous frame (the estimator's prior), a
         frame whose margin is too small is still decided when exactly one of the best pose and its
         runner-up lies within this rotation and translation of that prior (:func:`select_with_prior`):
@@ -71,6 +77,7 @@ class RegistrationConfig:
     seed: int = 0
     min_margin: float = 0.01
     min_inlier_fraction: float = 0.5
+    max_tau_m: float = 1e9
     track_max_deg: float = 20.0
     track_max_m: float = 1.0
 
@@ -284,7 +291,8 @@ def _icp(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, reach
 
 def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: SurfaceModel,
              centre: np.ndarray, config: RegistrationConfig = RegistrationConfig(),
-             seeds: list[tuple[np.ndarray, np.ndarray]] | None = None, flip_axis: str = "") -> RegistrationResult | None:
+             seeds: list[tuple[np.ndarray, np.ndarray]] | None = None, flip_axis: str = "",
+             sigma_d_px: float | None = None) -> RegistrationResult | None:
     """Best pose of the surface in ``lookup`` for the stereo ``points`` (N, 3, camera frame).
 
     Args:
@@ -294,6 +302,8 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
         flip_axis: body axis of the target's near-symmetry (``"x"``, ``"y"``, ``"z"``; ``""`` none):
             the best pose's 180° flip about it is refined and scored too, so the margin always
             measures the pose against its flip, even when no start converged to the flip.
+        sigma_d_px: disparity noise in pixels of ``K`` (default ``config.sigma_d_px``); a disparity
+            map upsampled from a smaller stereo window is noisier by the upsampling factor.
 
     Returns ``None`` with fewer than 12 points.
     """
@@ -306,7 +316,8 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
     P = P[np.random.default_rng(config.seed).permutation(len(P))[: config.max_points]]
     med = np.median(P, axis=0)
     z_med = float(max(med[2], 1e-3))
-    tau = max(config.tau_min_m, z_med ** 2 * config.sigma_d_px / (float(K[0, 0]) * float(baseline_m)))
+    sigma_d = config.sigma_d_px if sigma_d_px is None else float(sigma_d_px)
+    tau = max(config.tau_min_m, z_med ** 2 * sigma_d / (float(K[0, 0]) * float(baseline_m)))
     ray = med / max(float(np.linalg.norm(med)), 1e-9)
     c = np.asarray(centre, dtype=np.float64)
     R0 = start_rotations(config.starts, config.seed)

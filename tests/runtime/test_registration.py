@@ -272,3 +272,15 @@ def test_estimator_tracks_an_ambiguous_frame_from_the_previous_valid_pose(tmp_pa
                         threads=1, use_prior=False)
     off._prior = first
     assert off.estimate(left, right).status == "weak_votes"
+
+
+def test_estimator_leaves_a_frame_undecided_when_the_depth_is_too_coarse(tmp_path):
+    left, right = synthetic_pair()
+    est = PoseEstimator(paper_rig(640, 480),
+                        bundle=load_bundle(_registration_bundle(tmp_path, {"min_margin": 0.0, "max_tau_m": 0.05})),
+                        threads=1)
+    res = est.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes" and "too coarse" in res.detail
+    assert res.depth_tolerance_m >= RegistrationConfig().tau_min_m > 0.05
+    with pytest.raises(BundleError, match="max_tau_m"):
+        load_bundle(_registration_bundle(tmp_path / "z", {"max_tau_m": 0.0}))

@@ -24,6 +24,17 @@ def test_table_counts_and_proposal():
     assert propose([r for r in table if r["flips"]]) is None
 
 
+def test_depth_tolerance_gate():
+    rows = [dict(r, depth_tolerance_m=tau) for r, tau in zip(ROWS, [0.2, 0.3, 0.25, 2.0, None])]
+    rows[0]["flip_margin"] = 0.01  # now only the depth tolerance separates the wrong far pose at 0.06
+    table = gate_table(rows, [0.0], [0.0, 0.01], max_e_t=0.5, max_e_r=20.0, taus=[0.5, float("inf")])
+    near = next(r for r in table if r["min_flip_margin"] == 0.01 and r["max_tau_m"] == 0.5)
+    assert (near["kept"], near["flips"], near["wrong"]) == (2, 0, 0)
+    far = next(r for r in table if r["min_flip_margin"] == 0.01 and r["max_tau_m"] == float("inf"))
+    assert (far["kept"], far["wrong"]) == (3, 1)
+    assert propose(table)["max_tau_m"] == 0.5
+
+
 def test_cli_refuses_test_split_and_writes_json(tmp_path, capsys):
     report = tmp_path / "r.json"
     report.write_text(json.dumps({"split": "test", "frames": ROWS}))
