@@ -53,8 +53,8 @@ class RegistrationConfig:
     min_inlier_fraction: least share of the stereo points within ``tau`` of the surface at the
         kept pose (``fit_residual`` below it).
     max_tau_m: the largest depth tolerance at which a margin can decide the pose. The target's flip
-        about its near-symmetry axis moves only small parts of it (on ``tdrs`` 4 % of the surface, by
-        0.4-0.9 m), so with a coarser depth the margin measures the noise, not the target: beyond it
+        about its near-symmetry axis moves only small parts of it (on ``tdrs`` 4.3 % of the surface by
+        more than 10 cm, at most 0.9 m: ``python -m spacepose.tools.flip_relief``), so with a coarser depth the margin measures the noise, not the target: beyond it
         a frame is undecided whatever its margin (tracking may still decide it).
     track_max_deg, track_max_m: with a valid pose of the previous frame (the estimator's prior), a
         frame whose margin is too small is still decided when exactly one of the best pose and its
@@ -227,7 +227,12 @@ class SurfaceModel:
 
     def query(self, X: np.ndarray, reach_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Nearest sample of each (..., 3) point up to ``reach_m``: its point, normal and distance
-        (inf beyond). The fine grid answers where it reaches; the coarse one beyond it."""
+        (inf beyond). The fine grid answers where it reaches; the coarse one beyond it. A reach of
+        more than twice the fine grid's (the first, wide ICP iterations) reads the coarse grid alone."""
+        if reach_m > 2.0 * self.fine.reach:
+            idx, dist = self.coarse.query(X)
+            pts, nrm = self.coarse.points[np.maximum(idx, 0)], self.coarse.normals[np.maximum(idx, 0)]
+            return pts, nrm, np.where(dist <= reach_m, dist, np.inf)
         idx, dist = self.fine.query(X)
         pts, nrm = self.fine.points[np.maximum(idx, 0)], self.fine.normals[np.maximum(idx, 0)]
         if reach_m > self.fine.reach:
