@@ -5,11 +5,14 @@ The flow of one frame (DESIGN.md), each step a named stage timed in ``PoseResult
     validate -> rectify -> stereo (coarse pass or prior ROI, fine pass) -> pose_inputs (triangulate,
     back-project, sample, RGB crop, kNN indices: spacepose.pose_preprocess, shared with training)
     -> pose_net (ONNX) -> voting
-    (MeanShift + SVD fit, validity, confidence) [-> refine (point-to-plane ICP against the stereo
-    points; off by default)] -> verify (with the bundle's ``voting.flip_axis``: the pose or its 180°
-    flip, whichever the stereo points support, both refined when refine is on, spacepose.flip;
-    surface fitness against the stereo points; left-right photometric consistency,
-    spacepose.photometric). The checks judge the pose that is reported, refined or not.
+    (MeanShift + SVD fit, validity, confidence) [-> registration (with the bundle's ``registration``
+    section: multi-start point-to-plane ICP seeded with the voted pose and the previous valid pose;
+    it replaces the voted pose and its validity, spacepose.registration)] [-> refine (point-to-plane
+    ICP against the stereo points; off by default)] -> verify (without registration, with the
+    bundle's ``voting.flip_axis``: the pose or its 180° flip, whichever the stereo points support,
+    both refined when refine is on, spacepose.flip; surface fitness against the stereo points;
+    left-right photometric consistency, spacepose.photometric). The checks judge the pose that is
+    reported, refined or not.
 
 Input rule (one rule, no exceptions): an argument that is not a numpy array is a programming error
 and raises :class:`~spacepose.errors.ShapeError`; every numpy array the estimator cannot use — wrong
@@ -20,8 +23,9 @@ size that does not match the calibration, NaN/inf in a float image — gives a r
 
 Thread safety: :meth:`PoseEstimator.estimate` may be called from several threads. The onnxruntime
 sessions and the rectification maps are safe to share; the only mutable state, the previous pose
-used as the next frame's ROI prior, is read and written under ``self._lock``. With concurrent
-calls the prior is that of whichever frame finished last.
+used as the next frame's ROI prior (and, with registration, to decide an ambiguous frame), is read
+and written under ``self._lock``. With concurrent calls the prior is that of whichever frame
+finished last.
 """
 
 from __future__ import annotations
