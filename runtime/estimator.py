@@ -50,7 +50,7 @@ from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
-from .registration import SurfaceModel, register, select_with_prior
+from .registration import SurfaceModel, register, rotation_angle_deg, select_with_prior
 
 __all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
 
@@ -87,6 +87,8 @@ class PoseResult:
             registered pose and its runner-up (:mod:`spacepose.registration`). Not part of the JSON line.
         depth_tolerance_m: the registration's depth tolerance ``tau`` for this frame (NaN without
             registration). Not part of the JSON line.
+        tracked: the pose was decided by the previous frame's (registration with ``use_prior``:
+            the frame alone could not tell the pose from its flip). Not part of the JSON line.
     """
 
     R: np.ndarray
@@ -102,6 +104,7 @@ class PoseResult:
     detail: str = ""
     flip_margin: float = float("nan")
     depth_tolerance_m: float = float("nan")
+    tracked: bool = False
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -358,7 +361,8 @@ class PoseEstimator:
                             flip_margin=float("nan") if stage is None else float(
                                 stage.factors.get("flip_margin", float("nan"))),
                             depth_tolerance_m=float("nan") if stage is None else float(
-                                stage.factors.get("depth_tolerance_m", float("nan"))))
+                                stage.factors.get("depth_tolerance_m", float("nan"))),
+                            tracked=bool(valid and stage is not None and stage.factors.get("tracked", 0.0)))
         if status != "bad_input":  # a bad frame says nothing about where the target is
             with self._lock:
                 self._prior = result
@@ -398,9 +402,11 @@ class PoseEstimator:
         Confidence: ``inlier_fraction * (1 - exp(-margin / min_margin))``. A frame whose margin is
         too small is still valid when the previous frame's valid pose picks exactly one of the two
         (:func:`spacepose.registration.select_with_prior`): "tracked", confidence
-        ``0.5 * inlier_fraction``. A conclusive frame ignores the prior, so frames that are not a
-        sequence lose nothing: an unrelated previous pose lies within the tracking gates of one of the
-        two candidates only by rare chance (both 20° and 1 m by default).
+        ``0.5 * inlier_fraction``. A conclusive frame more than 90° from that prior is reported
+        ``weak_votes`` (one of the two is a flip, and the frame alone cannot say which), which also
+        clears the prior. Frames that are not a sequence lose little: a previous frame is rarely
+        valid, and an unrelated previous pose lies within the tracking gates of one of the two
+        candidates only by rare chance (both 20° and 1 m by default).
         """
         config, bundle = self.bundle.registration, self.bundle
         axis = bundle.voting.flip_axis
@@ -438,7 +444,13 @@ class PoseEstimator:
                     why + ("" if prior is None else "; the previous pose does not pick one"))
             (R, t), confidence = tracked, 0.5 * reg.inlier_fraction
             factors["tracked"] = 1.0
-        else:  # conclusive on its own: the prior is not needed (and frames need not be a sequence)
+        elif prior is not None and float(rotation_angle_deg(prior[0], R)) > 90.0:
+            # decided on its own, yet half turned from the previous frame's valid pose: one of the two is
+            # wrong and nothing says which; report neither, and the next frame starts without a prior
+            return _stage_invalid(stage, "weak_votes", factors), (
+                f"the registered pose is {float(rotation_angle_deg(prior[0], R)):.0f}° from the previous "
+                "frame's valid pose")
+        else:  # conclusive on its own
             confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),

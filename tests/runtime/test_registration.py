@@ -262,7 +262,7 @@ def test_estimator_tracks_an_ambiguous_frame_from_the_previous_valid_pose(tmp_pa
                            bundle=load_bundle(_registration_bundle(tmp_path / "s", {"min_margin": 0.5})), threads=1)
     strict._prior = first                                   # as if the previous frame had given it
     res = strict.estimate(left, right)
-    assert res.valid and res.status == "ok"
+    assert res.valid and res.status == "ok" and res.tracked and not first.tracked
     assert rotation_error_deg(first.R, res.R) < 5.0 and np.linalg.norm(first.t - res.t) < 0.3
     assert res.confidence <= 0.5
     # an invalid previous frame, or use_prior off, gives no prior: the frame stays undecided
@@ -284,3 +284,19 @@ def test_estimator_leaves_a_frame_undecided_when_the_depth_is_too_coarse(tmp_pat
     assert res.depth_tolerance_m >= RegistrationConfig().tau_min_m > 0.05
     with pytest.raises(BundleError, match="max_tau_m"):
         load_bundle(_registration_bundle(tmp_path / "z", {"max_tau_m": 0.0}))
+
+
+def test_a_conclusive_pose_half_turned_from_the_previous_one_is_not_reported(tmp_path):
+    import dataclasses
+
+    left, right = synthetic_pair()
+    est = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(_registration_bundle(tmp_path, {"min_margin": 0.0})),
+                        threads=1)
+    first = est.estimate(left, right)
+    assert first.valid and not first.tracked
+    turned = Rotation.from_euler("y", 120, degrees=True).as_matrix() @ first.R
+    est._prior = dataclasses.replace(first, R=turned)         # a valid previous pose the data contradict
+    res = est.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes" and "from the previous frame's valid pose" in res.detail
+    again = est.estimate(left, right)                         # that frame cleared the prior: decided alone again
+    assert again.valid and rotation_error_deg(again.R, first.R) < 5.0
