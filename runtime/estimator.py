@@ -294,13 +294,10 @@ class PoseEstimator:
     def _roi_hint(self):
         from .stereo_stage import RoiHint
 
-        if not self.use_prior:
+        prior = self._valid_prior()
+        if prior is None:
             return None
-        with self._lock:
-            prior = self._prior
-        if prior is None or not prior.valid:
-            return None
-        centre = prior.R @ self.bundle.centre + prior.t
+        centre = prior[0] @ self.bundle.centre + prior[1]
         z = float(centre[2])
         r = self.bundle.radius
         if z - r <= 0.0:
