@@ -11,8 +11,9 @@ The best pose is returned with the score of the best *distinct* alternative (mor
 ``distinct_deg`` away in orientation): the gap between the two is the evidence that the kept pose
 and not, say, its 180° flip about the target's near-symmetry axis is the one the data show.
 (A free-space term — surface the pose puts where the stereo data see nothing — was tried as a
-second score and made the flip decision worse on 40 test frames: 13 flips against 3 in 16. The
-stereo graph's holes and fattened outline are not clean enough evidence of empty space.)
+second score in session 7 and made the flip decision worse: 7 of the first 16 test frames came out
+flipped with it, 3 without (an exploratory script, not kept). The stereo graph's holes and
+fattened outline are not clean enough evidence of empty space.)
 
 Nearest surface samples come from :class:`SurfaceLookup`, a voxel grid in the object frame filled
 once per bundle (each cell holds its nearest sample within ``reach``), so one ICP iteration over all
@@ -29,8 +30,7 @@ import numpy as np
 from .errors import check_shape
 
 __all__ = ["RegistrationConfig", "SurfaceLookup", "SurfaceModel", "RegistrationResult", "start_rotations", "register",
-           "select_with_prior",
-           "rotation_angle_deg"]
+           "select_with_prior", "rotation_angle_deg", "exp_so3"]
 
 
 @dataclass(frozen=True)
@@ -53,9 +53,10 @@ class RegistrationConfig:
     min_inlier_fraction: least share of the stereo points within ``tau`` of the surface at the
         kept pose (``fit_residual`` below it).
     max_tau_m: the largest depth tolerance at which a margin can decide the pose. The target's flip
-        about its near-symmetry axis moves only small parts of it (on ``tdrs`` 4.3 % of the surface by
-        more than 10 cm, at most 0.9 m: ``python -m spacepose.tools.flip_relief``), so with a coarser depth the margin measures the noise, not the target: beyond it
-        a frame is undecided whatever its margin (tracking may still decide it).
+        about its near-symmetry axis moves only small parts of it (on ``tdrs`` 4.3 % of the surface
+        by more than 10 cm, at most 0.9 m: ``python -m spacepose.tools.flip_relief``), so with a
+        coarser depth the margin measures the noise, not the target: beyond it a frame is undecided
+        whatever its margin (tracking may still decide it).
     track_max_deg, track_max_m: with a valid pose of the previous frame (the estimator's prior), a
         frame whose margin is too small is still decided when exactly one of the best pose and its
         runner-up lies within this rotation and translation of that prior (:func:`select_with_prior`):
@@ -116,7 +117,7 @@ def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
         np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], -2)
 
 
-def _exp_so3(w: np.ndarray) -> np.ndarray:
+def exp_so3(w: np.ndarray) -> np.ndarray:
     """(..., 3) rotation vectors -> (..., 3, 3) (Rodrigues)."""
     angle = np.linalg.norm(w, axis=-1, keepdims=True)
     k = w / np.maximum(angle, 1e-12)
@@ -288,7 +289,7 @@ def _icp(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, reach
         enough = w.sum(axis=1) >= 12
         step = np.linalg.solve(H, g[..., None])[..., 0]
         step[~enough] = 0.0
-        dR = _exp_so3(step[:, :3])
+        dR = exp_so3(step[:, :3])
         R = R @ np.swapaxes(dR, 1, 2)                                         # X' = dR X + v
         t = t - np.einsum("kij,kj->ki", R, step[:, 3:])
     return R, t

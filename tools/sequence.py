@@ -33,11 +33,11 @@ log = logging.getLogger(__name__)
 
 def tumble(R0: np.ndarray, axis: np.ndarray, rate_deg: float, frames: int) -> np.ndarray:
     """(frames, 3, 3): ``R_k = exp(k * rate * axis) @ R0`` (turning about a camera-frame axis)."""
-    from spacepose.registration import _exp_so3
+    from spacepose.registration import exp_so3
 
     axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
     k = np.arange(int(frames), dtype=np.float64)[:, None]
-    return _exp_so3(k * math.radians(rate_deg) * axis[None]) @ np.asarray(R0, dtype=np.float64)
+    return exp_so3(k * math.radians(rate_deg) * axis[None]) @ np.asarray(R0, dtype=np.float64)
 
 
 def render_sequence(out: str | Path, frames: int = 60, distance_m: float = 15.0, rate_deg: float = 2.0,
