@@ -299,9 +299,10 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
              centre: np.ndarray, config: RegistrationConfig = RegistrationConfig(),
              seeds: list[tuple[np.ndarray, np.ndarray]] | None = None, flip_axis: str = "",
              sigma_d_px: float | None = None) -> RegistrationResult | None:
-    """Best pose of the surface in ``lookup`` for the stereo ``points`` (N, 3, camera frame).
+    """Best pose of the surface in ``model`` for the stereo ``points`` (N, 3, camera frame).
 
     Args:
+        model: the target's surface samples (:class:`SurfaceModel`, built once per bundle).
         K, baseline_m: rectified left intrinsics and baseline (``tau`` from the disparity noise).
         centre: (3,) object-frame centre (the starts put it behind the points' median).
         seeds: extra starting poses ``(R, t)``, e.g. the pose network's and its flip.
@@ -357,8 +358,8 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
         runner, runner_angle, R_run, t_run = float("inf"), 0.0, np.full((3, 3), np.nan), np.full(3, np.nan)
     X = (P - t[best]) @ R[best]
     _, _, dist = model.query(X, tau)
-    return RegistrationResult(R=R[best], t=t[best], score=float(score[best]), runner_up_score=runner, runner_up_angle_deg=runner_angle,
-                              runner_up_R=R_run, runner_up_t=t_run,
+    return RegistrationResult(R=R[best], t=t[best], score=float(score[best]), runner_up_score=runner,
+                              runner_up_angle_deg=runner_angle, runner_up_R=R_run, runner_up_t=t_run,
                               inlier_fraction=float(np.mean(dist < tau)), tau_m=float(tau), starts=len(R0))
 
 
