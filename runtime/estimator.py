@@ -450,8 +450,9 @@ class PoseEstimator:
         else:  # conclusive on its own
             confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
+        n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),
-                                   bandwidth=bandwidth, factors={**stage.factors, **factors}), ""
+                                   bandwidth=bandwidth, n_inliers=n_inliers, factors={**stage.factors, **factors}), ""
 
     def _valid_prior(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The previous frame's pose when it was valid and ``use_prior`` is on, else ``None``."""

@@ -254,7 +254,7 @@ class RegistrationResult:
     (inf when every start converged to the same pose), ``runner_up_R``/``runner_up_t`` that pose (NaN
     without one) and ``runner_up_angle_deg`` how far it is from the best.
     inlier_fraction: stereo points within ``tau`` of the surface at the best pose. tau_m: the
-    frame's depth tolerance. starts: poses tried.
+    frame's depth tolerance. starts: poses tried. n_points: stereo points registered (after the subsample).
     """
 
     R: np.ndarray
@@ -267,6 +267,7 @@ class RegistrationResult:
     inlier_fraction: float
     tau_m: float
     starts: int
+    n_points: int = 0
 
     @property
     def margin(self) -> float:
@@ -360,7 +361,8 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
     _, _, dist = model.query(X, tau)
     return RegistrationResult(R=R[best], t=t[best], score=float(score[best]), runner_up_score=runner,
                               runner_up_angle_deg=runner_angle, runner_up_R=R_run, runner_up_t=t_run,
-                              inlier_fraction=float(np.mean(dist < tau)), tau_m=float(tau), starts=len(R0))
+                              inlier_fraction=float(np.mean(dist < tau)), tau_m=float(tau), starts=len(R0),
+                              n_points=len(P))
 
 
 def select_with_prior(result: RegistrationResult, R_prior: np.ndarray, t_prior: np.ndarray,

@@ -121,7 +121,7 @@ def test_register_recovers_the_pose_from_any_orientation(asymmetric_model, seed)
     res = register(scene, K, 1.0, model, np.zeros(3), RegistrationConfig(min_margin=0.0))
     assert rotation_error_deg(R_true, res.R) < 2.0
     assert np.linalg.norm(res.t - t_true) < 0.1
-    assert res.inlier_fraction > 0.9
+    assert res.inlier_fraction > 0.9 and res.n_points == min(len(scene), RegistrationConfig().max_points)
     assert res.margin > 0.05          # inf when every refined start found this same pose
 
 
@@ -215,6 +215,7 @@ def test_estimator_registers_and_reports_an_ambiguous_pose_invalid(tmp_path):
     disparity = est.stereo.match(*est.rectification.rectify_pair(left, right)).disparity
     assert abs(res.t[2] - 800.0 / np.median(disparity[disparity > 0])) < 0.5   # on the stereo points
     assert abs(abs(res.R[2, 2]) - 1.0) < 0.05          # plate normal along the optical axis
+    assert 0 < res.n_points <= RegistrationConfig().max_points   # the registered points it rests on
     strict = PoseEstimator(paper_rig(640, 480),
                            bundle=load_bundle(_registration_bundle(tmp_path / "s", {"min_margin": 0.5})), threads=1)
     res = strict.estimate(left, right)
