@@ -478,7 +478,8 @@ def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | No
     defaults = RegistrationConfig()
     values: dict[str, Any] = {}
     for name in RegistrationConfig.__dataclass_fields__:
-        default, value, where = getattr(defaults, name), data.get(name, getattr(defaults, name)), f"registration.{name}"
+        default = getattr(defaults, name)
+        value, where = data.get(name, default), f"registration.{name}"
         if isinstance(default, int):
             value = _integer(value, where, minimum=0 if name == "seed" else 1)
         else:

@@ -441,12 +441,11 @@ class PoseEstimator:
                     why + ("" if prior is None else "; the previous pose does not pick one"))
             (R, t), confidence = tracked, 0.5 * reg.inlier_fraction
             factors["tracked"] = 1.0
-        elif prior is not None and float(rotation_angle_deg(prior[0], R)) > 90.0:
+        elif prior is not None and (turned := float(rotation_angle_deg(prior[0], R))) > 90.0:
             # decided on its own, yet half turned from the previous frame's valid pose: one of the two is
             # wrong and nothing says which; report neither, and the next frame starts without a prior
             return _stage_invalid(stage, "weak_votes", factors), (
-                f"the registered pose is {float(rotation_angle_deg(prior[0], R)):.0f}° from the previous "
-                "frame's valid pose")
+                f"the registered pose is {turned:.0f}° from the previous frame's valid pose")
         else:  # conclusive on its own
             confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after

@@ -341,14 +341,15 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
     costs = _scene_cost(R, t, P_coarse, model, tau)
     top = np.argsort(costs, kind="stable")[: max(1, config.refine_top)]
     R, t = _icp(R[top], t[top], P, model, [floor] * config.fine_iterations)
+    score = _scene_cost(R, t, P, model, tau)
     if flip_axis:
         from .flip import flipped_pose  # here: spacepose.flip -> pose_stage -> bundle imports this module
 
-        k = int(np.argmin(_scene_cost(R, t, P, model, tau)))
+        k = int(np.argmin(score))
         R_f, t_f = flipped_pose(R[k], t[k], c, flip_axis)
         R_f, t_f = _icp(R_f[None], t_f[None], P, model, [floor] * config.fine_iterations)
         R, t = np.concatenate([R, R_f]), np.concatenate([t, t_f])
-    score = _scene_cost(R, t, P, model, tau)
+        score = np.concatenate([score, _scene_cost(R_f, t_f, P, model, tau)])
     best = int(np.argmin(score))
     angles = rotation_angle_deg(R[best][None], R)
     distinct = angles > config.distinct_deg

@@ -15,6 +15,7 @@ pair. The thresholds come from train frames only; the test split measures them. 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 from pathlib import Path
@@ -50,13 +51,12 @@ def gate_table(rows: Iterable[dict[str, Any]], confidences: Sequence[float], mar
     flip = e_r > FLIP_DEG
     wrong = (e_t > max_e_t) | (e_r > max_e_r)
     table = []
-    for c, m, tmax in ((c, m, tmax) for c in confidences for m in margins for tmax in taus):
-            keep = (conf >= c) & (margin >= m) & (tau <= tmax)
-            table.append({"min_confidence": float(c), "min_flip_margin": float(m), "max_tau_m": float(tmax),
-                          "kept": int(keep.sum()),
-                          "flips": int((keep & flip).sum()), "wrong": int((keep & wrong).sum()),
-                          "e_t_median": float(np.median(e_t[keep])) if keep.any() else float("nan"),
-                          "e_R_median": float(np.median(e_r[keep])) if keep.any() else float("nan")})
+    for c, m, tmax in itertools.product(confidences, margins, taus):
+        keep = (conf >= c) & (margin >= m) & (tau <= tmax)
+        table.append({"min_confidence": float(c), "min_flip_margin": float(m), "max_tau_m": float(tmax),
+                      "kept": int(keep.sum()), "flips": int((keep & flip).sum()), "wrong": int((keep & wrong).sum()),
+                      "e_t_median": float(np.median(e_t[keep])) if keep.any() else float("nan"),
+                      "e_R_median": float(np.median(e_r[keep])) if keep.any() else float("nan")})
     return table
 
 
