@@ -129,10 +129,13 @@ def parity_check(model: nn.Module, onnx_path: str | os.PathLike, *, seed: int = 
     return diffs
 
 
-def target_geometry(target: str, centre: np.ndarray, n_surface: int = 6000, seed: int = 0) -> dict[str, Any]:
+def target_geometry(target: str, centre: np.ndarray, n_surface: int = 6000, seed: int = 0,
+                    n_silhouette: int = 0) -> dict[str, Any]:
     """``mesh_scale``, ``radius`` (about ``centre``), ``bbox_min``/``bbox_max`` and ``n_surface``
     area-uniform ``surface_points`` with their faces' unit ``surface_normals`` (seeded; for the
-    runtime's surface checks, ICP and :mod:`spacepose.registration`) of a shipped target mesh."""
+    runtime's surface checks, ICP and :mod:`spacepose.registration`) of a shipped target mesh.
+    With ``n_silhouette`` > 0 also that many more area-uniform ``silhouette_points`` (seed
+    ``seed + 1``), whose splat is the target's outline in :mod:`spacepose.silhouette`."""
     import trimesh
 
     from spacepose.tools.targets import load_target
@@ -144,9 +147,13 @@ def target_geometry(target: str, centre: np.ndarray, n_surface: int = 6000, seed
     surface, faces = trimesh.sample.sample_surface(tg.mesh, int(n_surface), seed=int(seed))
     normals = np.asarray(tg.mesh.face_normals, dtype=np.float64)[faces]
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    return {"mesh_scale": float(tg.scale), "radius": radius, "bbox_min": lo.tolist(), "bbox_max": hi.tolist(),
-            "surface_points": np.round(np.asarray(surface, dtype=np.float64), 4).tolist(),
-            "surface_normals": np.round(normals, 5).tolist()}
+    out = {"mesh_scale": float(tg.scale), "radius": radius, "bbox_min": lo.tolist(), "bbox_max": hi.tolist(),
+           "surface_points": np.round(np.asarray(surface, dtype=np.float64), 4).tolist(),
+           "surface_normals": np.round(normals, 5).tolist()}
+    if n_silhouette > 0:
+        outline, _ = trimesh.sample.sample_surface(tg.mesh, int(n_silhouette), seed=int(seed) + 1)
+        out["silhouette_points"] = np.round(np.asarray(outline, dtype=np.float64), 3).tolist()
+    return out
 
 
 def write_pose_manifest(bundle_dir: str | os.PathLike, *, net_config: PoseNetConfig, keypoints: np.ndarray,

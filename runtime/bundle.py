@@ -17,8 +17,10 @@ A bundle is a folder::
                  "radius": 3.03,                       # bounding-sphere radius about "centre", metres
                  "bbox_min": [x, y, z], "bbox_max": [x, y, z],
                  "surface_points": [[x, y, z], ...],   # optional (S, 3), for ICP refinement
-                 "surface_normals": [[x, y, z], ...]}, # optional (S, 3) unit normals of those
+                 "surface_normals": [[x, y, z], ...],  # optional (S, 3) unit normals of those
                                                        # (PCA normals of the samples if absent)
+                 "silhouette_points": [[x, y, z], ...]},  # optional (Q, 3) dense area-uniform
+                                                       # samples whose splat is the target's outline
       "stereo": {"file": "stereo.onnx", "input_size": [256, 256], "iters": 8,
                  "normalisation": "rgb_0_255", "max_disp": 192,
                  "disparity_range_px": [lo, hi],       # optional: disparities (graph input px) seen
@@ -38,6 +40,10 @@ A bundle is a folder::
       "registration": {"starts": 48, "min_margin": 0.01, ...},   # optional: multi-start ICP of the
                                        # surface to the stereo points decides the pose (its fields:
                                        # spacepose.registration.RegistrationConfig); absent: off
+      "silhouette": {"max_chamfer_px": 1.2, ...},   # optional, needs registration and
+                                       # target.silhouette_points: the outline decides between the
+                                       # registered pose and its flip (spacepose.silhouette.
+                                       # SilhouetteConfig); absent: off
       "rig": {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0},
       "distance_range_m": [10.0, 50.0],
       "dataset": {"seed": 0, "size": 10000},
@@ -69,6 +75,7 @@ import numpy as np
 from .errors import BundleError
 from .pose_inputs import PoseInputSpec
 from .registration import RegistrationConfig
+from .silhouette import SilhouetteConfig
 
 __all__ = [
     "SCHEMA",
@@ -192,8 +199,10 @@ class ModelBundle:
         keypoints: (M, 3) float64 object-frame keypoints; ``centre`` (3,) the object-frame centre.
         radius: bounding-sphere radius about ``centre`` (m); ``bbox_min``/``bbox_max`` (3,) the
             object-frame bounding box (overlays, ICP sanity); ``surface_points`` (S, 3), maybe empty,
-            and ``surface_normals`` (S, 3) their normals (empty when the manifest has none).
+            and ``surface_normals`` (S, 3) their normals (empty when the manifest has none);
+            ``silhouette_points`` (Q, 3) the outline samples (empty when the manifest has none).
         registration: multi-start registration settings, ``None`` when the bundle does not use it.
+        silhouette: outline-stage settings, ``None`` when the bundle does not use it.
         stereo, pose, voting: graph and voting configs; ``rig``: the training rig.
         distance_range_m: (near, far) target distance the graphs were trained for.
         dataset_seed, dataset_size, training_commit, metrics: provenance and measured numbers.
@@ -220,6 +229,8 @@ class ModelBundle:
     training_commit: str
     metrics: Mapping[str, Any] = field(default_factory=dict)
     registration: RegistrationConfig | None = None
+    silhouette_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    silhouette: SilhouetteConfig | None = None
     graph_metadata: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     @property
@@ -495,6 +506,31 @@ def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | No
     return RegistrationConfig(**values)
 
 
+def _parse_silhouette(section: Any, n_points: int, has_registration: bool) -> SilhouetteConfig | None:
+    if section is None:
+        return None
+    if not isinstance(section, Mapping):
+        raise BundleError(f"bundle.json: silhouette must be an object, got {type(section).__name__}")
+    if n_points < 100 or not has_registration:
+        raise BundleError("bundle.json: silhouette needs target.silhouette_points (at least 100) and a registration "
+                          "section (it decides between the registered pose and its flip)")
+    data = _optional_fields(SilhouetteConfig, section, "silhouette")
+    defaults = SilhouetteConfig()
+    values: dict[str, Any] = {}
+    for name in SilhouetteConfig.__dataclass_fields__:
+        default = getattr(defaults, name)
+        value, where = data.get(name, default), f"silhouette.{name}"
+        if isinstance(default, int):
+            value = _integer(value, where, minimum=0 if name in ("seed", "iterations", "stereo_points", "reverse") else 1)
+        else:
+            value = _number(value, where, positive=name not in ("depth_margin_m", "min_margin_px"))
+        values[name] = value
+    try:
+        return SilhouetteConfig(**values)
+    except ValueError as err:
+        raise BundleError(f"bundle.json: {err}") from err
+
+
 def _parse_manifest(data: Any, path: Path) -> ModelBundle:
     if not isinstance(data, dict):
         raise BundleError(f"bundle.json must hold an object, got {type(data).__name__}")
@@ -515,6 +551,8 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
     normals = np.zeros((0, 3)) if normals is None else _vector(normals, "target.surface_normals", (len(surface), 3))
     if len(normals) and not np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-2):
         raise BundleError("bundle.json: target.surface_normals must be unit vectors")
+    outline = target.get("silhouette_points")
+    outline = np.zeros((0, 3)) if outline is None else _vector(outline, "target.silhouette_points", (None, 3))
     pose = _parse_pose(_get(data, "pose", ""))
     if pose.n_keypoints != keypoints.shape[0]:
         raise BundleError(f"bundle.json: pose.n_keypoints={pose.n_keypoints} but target.keypoints holds "
@@ -549,6 +587,8 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         training_commit=str(data.get("training_commit", "unknown")),
         metrics=metrics,
         registration=_parse_registration(data.get("registration"), len(surface)),
+        silhouette_points=_frozen(outline),
+        silhouette=_parse_silhouette(data.get("silhouette"), len(outline), data.get("registration") is not None),
     )
 
 

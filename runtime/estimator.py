@@ -51,6 +51,7 @@ from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 from .registration import SurfaceModel, register, rotation_angle_deg, select_with_prior
+from .silhouette import decide_outline
 
 __all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
 
@@ -60,7 +61,8 @@ logger = logging.getLogger(__name__)
 DARK_FRACTION = 0.02
 #: a frame with more than this fraction of pixels at full scale is "saturated"
 SATURATED_FRACTION = 0.5
-#: pose crop side = this margin * longest side of the target pixels' box
+#: statuses after which a frame run in the previous pose's window is run again with the coarse pass
+_WINDOW_MISSES = frozenset({"no_target", "too_few_points", "out_of_range", "fit_residual"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,6 +91,10 @@ class PoseResult:
             registration). Not part of the JSON line.
         tracked: the pose was decided by the previous frame's (registration with ``use_prior``:
             the frame alone could not tell the pose from its flip). Not part of the JSON line.
+        outline_chamfer_px, outline_margin_px: with the bundle's ``silhouette`` stage, the chamfer
+            distance (outline px: pixels of a ``max_side_px`` view of the stereo window) of the best outline-refined pose to the outline the stereo
+            disparity shows, and the gap to the best pose more than 90° from it
+            (:mod:`spacepose.silhouette`); NaN when the stage did not run. Not part of the JSON line.
     """
 
     R: np.ndarray
@@ -105,6 +111,8 @@ class PoseResult:
     flip_margin: float = float("nan")
     depth_tolerance_m: float = float("nan")
     tracked: bool = False
+    outline_chamfer_px: float = float("nan")
+    outline_margin_px: float = float("nan")
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -282,6 +290,8 @@ class PoseEstimator:
                                   else _surface_normals(surface)) if wants_normals else None)
         self._registration = (SurfaceModel(surface, self._surface_normals)
                               if self.bundle.registration is not None else None)
+        self._outline_points = (np.ascontiguousarray(self.bundle.silhouette_points, dtype=np.float32)
+                                if self.bundle.silhouette is not None and self._registration is not None else None)
         self._lock = threading.Lock()
         self._prior: PoseResult | None = None
 
@@ -350,6 +360,7 @@ class PoseEstimator:
             R, t, conf, valid = stage.R, stage.t, stage.confidence, True
         else:
             R, t, conf, valid = np.full((3, 3), np.nan), np.full(3, np.nan), 0.0, False
+        nan = float("nan")
         result = PoseResult(R=R, t=t, q_wxyz=rotation_to_quaternion(R), valid=valid, status=status,
                             confidence=float(conf), timings_ms=dict(timer.timings_ms),
                             network_ms=timer.network_ms,
@@ -359,7 +370,11 @@ class PoseEstimator:
                                 stage.factors.get("flip_margin", float("nan"))),
                             depth_tolerance_m=float("nan") if stage is None else float(
                                 stage.factors.get("depth_tolerance_m", float("nan"))),
-                            tracked=bool(valid and stage is not None and stage.factors.get("tracked", 0.0)))
+                            tracked=bool(valid and stage is not None and stage.factors.get("tracked", 0.0)),
+                            outline_chamfer_px=nan if stage is None else float(
+                                stage.factors.get("outline_chamfer_px", nan)),
+                            outline_margin_px=nan if stage is None else float(
+                                stage.factors.get("outline_margin_px", nan)))
         if status != "bad_input":  # a bad frame says nothing about where the target is
             with self._lock:
                 self._prior = result
@@ -382,28 +397,45 @@ class PoseEstimator:
             left_r, right_r = self.rectification.rectify_pair(left, right)
         hint = self._roi_hint()
         outcome = self._pose_from_pair(left_r, right_r, hint, timer)
-        if hint is not None and outcome[0] != "ok":
+        if hint is not None and outcome[0] in _WINDOW_MISSES:
             # the previous pose's window may have lost the target (it moved, or the frames are not a
-            # sequence): look again over the whole frame rather than report a miss
+            # sequence): look again over the whole frame rather than report a miss. A frame that found
+            # and registered the target but cannot tell its pose from the flip (weak_votes) would only
+            # find the same target again, at twice the cost
             logger.info("prior window gave %s; retrying with the coarse pass", outcome[0])
             outcome = self._pose_from_pair(left_r, right_r, None, timer)
         status, stage, window, detail = outcome
         return self._result(status, timer, stage=stage, window=window, detail=detail)
 
-    def _register(self, xyz: np.ndarray, stage: PoseStageResult, stereo_scale: float) -> tuple[PoseStageResult, str]:
+    def _register(self, xyz: np.ndarray, stage: PoseStageResult, stereo: Any, timer: StageTimer
+                  ) -> tuple[PoseStageResult, str]:
         """Multi-start registration (:mod:`spacepose.registration`) seeded with the network's pose
-        (and the previous frame's valid pose, with ``use_prior``), each with its flip.
+        (and the previous frame's valid pose, with ``use_prior``), each with its flip; then, with
+        the bundle's ``silhouette`` stage, the outline (:mod:`spacepose.silhouette`).
 
         The registered pose replaces the voted one; its validity is the registration's own
-        (inlier share, the fitted distance in range, margin over the best distinct alternative).
-        Confidence: ``inlier_fraction * (1 - exp(-margin / min_margin))``. A frame whose margin is
-        too small is still valid when the previous frame's valid pose picks exactly one of the two
-        (:func:`spacepose.registration.select_with_prior`): "tracked", confidence
-        ``0.5 * inlier_fraction``. A conclusive frame more than 90° from that prior is reported
-        ``weak_votes`` (one of the two is a flip, and the frame alone cannot say which), which also
-        clears the prior. Frames that are not a sequence lose little: a previous frame is rarely
-        valid, and an unrelated previous pose lies within the tracking gates of one of the two
-        candidates only by rare chance (both 20° and 1 m by default).
+        (inlier share, the fitted distance in range). Which of the registered pose and its flip it
+        is, is decided, in this order, by:
+
+        1. the outline: both refined against the outline the stereo disparity shows; the winner
+           is valid when it fits well (``max_chamfer_px``) and clearly better than the best pose
+           more than 90° from it (``min_margin_px``). Confidence
+           ``inlier_fraction * (1 - exp(-margin_px / min_margin_px))``. When the registration is
+           conclusive (below) and picks the other one, the frame is ``weak_votes``.
+        2. the registration's margin over its best distinct alternative (``min_margin``, with a
+           depth fine enough, ``max_tau_m``): confidence
+           ``inlier_fraction * (1 - exp(-margin / min_margin))``; the pose is the outline-refined
+           one when that refinement fits the outline within ``max_chamfer_px``.
+        3. the previous frame's valid pose, when exactly one of the two is near it
+           (:func:`spacepose.registration.select_with_prior`): "tracked", confidence
+           ``0.5 * inlier_fraction``.
+
+        Otherwise the frame is ``weak_votes``. A pose decided by 1 or 2 that is more than 90° from
+        the previous frame's valid pose is reported ``weak_votes`` too (one of the two is a flip,
+        and the frame alone cannot say which), which also clears the prior. Frames that are not a
+        sequence lose little: a previous frame is rarely valid, and an unrelated previous pose lies
+        within the tracking gates of one of the two candidates only by rare chance (both 20° and 1 m
+        by default).
         """
         config, bundle = self.bundle.registration, self.bundle
         axis = bundle.voting.flip_axis
@@ -414,8 +446,9 @@ class PoseEstimator:
                 seeds.append((R_s, t_s))
                 if axis:
                     seeds.append(flipped_pose(R_s, t_s, bundle.centre, axis))
-        reg = register(xyz, self.K, self.baseline_m, self._registration, bundle.centre, config, seeds=seeds,
-                       flip_axis=axis, sigma_d_px=config.sigma_d_px / max(stereo_scale, 1e-9))
+        with timer.stage("registration"):
+            reg = register(xyz, self.K, self.baseline_m, self._registration, bundle.centre, config, seeds=seeds,
+                           flip_axis=axis, sigma_d_px=config.sigma_d_px / max(stereo.scale, 1e-9))
         if reg is None:
             return _stage_invalid(stage, "too_few_points"), "too few stereo points to register the target"
         margin = reg.margin
@@ -430,28 +463,62 @@ class PoseEstimator:
             return _stage_invalid(stage, "out_of_range", factors), (
                 f"registered target distance {distance:.1f} m outside {lo:.1f}-{hi:.1f} m")
         R, t = reg.R, reg.t
-        tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
-        if margin < config.min_margin or reg.tau_m > config.max_tau_m:
+        conclusive = margin >= config.min_margin and reg.tau_m <= config.max_tau_m
+        outline = None
+        if self._outline_points is not None and stereo.window is not None:
+            with timer.stage("silhouette"):
+                outline = self._outline(reg, xyz, stereo)
+            factors.update(outline_chamfer_px=outline.best.chamfer_px, outline_margin_px=outline.margin_px)
+        sil = bundle.silhouette
+        if outline is not None and outline.decided(sil):
+            if conclusive and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:
+                return _stage_invalid(stage, "weak_votes", factors), (
+                    "the outline and the stereo points pick opposite poses (the pose and its flip)")
+            R, t = outline.best.R, outline.best.t
+            confidence = reg.inlier_fraction * (1.0 - math.exp(-outline.margin_px / max(sil.min_margin_px, 1e-9)))
+        elif conclusive:
+            if (outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px
+                    and float(rotation_angle_deg(reg.R, outline.best.R)) <= 90.0):
+                R, t = outline.best.R, outline.best.t
+            confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
+        else:
+            tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
             if tracked is None:
                 why = (f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
                        f"(score gap {margin:.4f} < {config.min_margin:.4f})" if margin < config.min_margin else
                        f"the stereo depth (tolerance {reg.tau_m:.2f} m > {config.max_tau_m:.2f} m) is too coarse "
                        "to tell the pose from its flip")
+                if outline is not None:
+                    why += (f"; the outline does not decide (chamfer {outline.best.chamfer_px:.2f} px, "
+                            f"margin {outline.margin_px:.2f} px)")
                 return _stage_invalid(stage, "weak_votes", factors), (
                     why + ("" if prior is None else "; the previous pose does not pick one"))
             (R, t), confidence = tracked, 0.5 * reg.inlier_fraction
             factors["tracked"] = 1.0
-        elif prior is not None and (turned := float(rotation_angle_deg(prior[0], R))) > 90.0:
+        if not factors.get("tracked") and prior is not None and (turned := float(rotation_angle_deg(prior[0], R))) > 90.0:
             # decided on its own, yet half turned from the previous frame's valid pose: one of the two is
             # wrong and nothing says which; report neither, and the next frame starts without a prior
             return _stage_invalid(stage, "weak_votes", factors), (
-                f"the registered pose is {turned:.0f}° from the previous frame's valid pose")
-        else:  # conclusive on its own
-            confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
+                f"the pose is {turned:.0f}° from the previous frame's valid pose")
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),
                                    bandwidth=bandwidth, n_inliers=n_inliers, factors={**stage.factors, **factors}), ""
+
+    def _outline(self, reg: Any, xyz: np.ndarray, stereo: Any) -> Any:
+        """The outline decision (:func:`spacepose.silhouette.decide_outline`) between the registered
+        pose and its runner-up (when that is more than 90° away), plus the flip of the better one."""
+        bundle = self.bundle
+        axis, centre = bundle.voting.flip_axis, bundle.centre
+        candidates = [(reg.R, reg.t)]
+        if (reg.runner_up_angle_deg > 90.0 and np.all(np.isfinite(reg.runner_up_R))
+                and np.all(np.isfinite(reg.runner_up_t))):
+            candidates.append((reg.runner_up_R, reg.runner_up_t))
+        flip = (lambda R, t: flipped_pose(R, t, centre, axis)) if axis else None
+        w = stereo.window
+        return decide_outline(candidates, self._outline_points, stereo.disparity, self.K, self.baseline_m,
+                              (w.x0, w.y0, w.side), bundle.silhouette, stereo_points=xyz,
+                              surface=self._registration, tau_m=reg.tau_m, flip=flip)
 
     def _valid_prior(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The previous frame's pose when it was valid and ``use_prior`` is on, else ``None``."""
@@ -499,8 +566,7 @@ class PoseEstimator:
                 sigma_d_px=voting.sigma_d_px / max(stereo.scale, 1e-9), offset_sign=bundle.pose.offset_sign,
                 seed=self.seed)
         if self._registration is not None:
-            with timer.stage("registration"):
-                stage, detail = self._register(xyz, stage, stereo.scale)
+            stage, detail = self._register(xyz, stage, stereo, timer)  # times "registration", "silhouette"
             if not stage.valid:  # the invalid stage still carries its diagnostics (flip_margin)
                 return stage.status, stage, stereo.window, detail
         refine = None

@@ -1,5 +1,6 @@
 """Validity thresholds of the pose stage from train-split frames: ``min_confidence``, ``min_flip_margin``
-(and, for a registration bundle, ``max_tau_m`` with ``--taus``).
+(and, for a registration bundle, ``max_tau_m`` with ``--taus``; for a silhouette bundle the outline
+gates ``max_chamfer_px`` / ``min_margin_px`` with ``--outline``).
 
     spacepose eval-pose data/tdrs640 --split train --limit 400 --bundle B --out runs/gates_train
     python -m spacepose.tools.calibrate_gates runs/gates_train/pose_eval.json --out reports/gates_train.json
@@ -10,6 +11,11 @@ margin. For each pair of thresholds on a grid, this counts the poses that would 
 180° flips among them (e_R > 90°) and the wrong poses (e_t or e_R over ``--max-e-t`` / ``--max-e-r``).
 It proposes the pair that keeps the most poses with no flip and no wrong pose. Ties go to the stricter
 pair. The thresholds come from train frames only; the test split measures them. Numbers only.
+
+``--outline``: the evaluation ran with the silhouette gates open (``silhouette.max_chamfer_px`` large,
+``min_margin_px`` 0) and the registration's margin closed (``registration.min_margin`` 0.99), so that
+every frame the outline stage saw is valid in the report with its ``outline_chamfer_px`` and
+``outline_margin_px``; the grid is then over those two gates.
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ import numpy as np
 
 from spacepose.tools.eval_pose import FLIP_DEG
 
-__all__ = ["gate_table", "propose", "main"]
+__all__ = ["gate_table", "outline_gate_table", "propose", "propose_outline", "main"]
 
 
 def _finite(value: Any) -> float:
@@ -60,6 +66,36 @@ def gate_table(rows: Iterable[dict[str, Any]], confidences: Sequence[float], mar
     return table
 
 
+def outline_gate_table(rows: Iterable[dict[str, Any]], chamfers: Sequence[float], margins: Sequence[float],
+                       max_e_t: float, max_e_r: float) -> list[dict[str, float]]:
+    """One row per (max_chamfer_px, min_margin_px): kept poses, flips, wrong poses among them, and the
+    mean errors of the kept poses that are not flips."""
+    ok = [r for r in rows if r.get("valid")]
+    chamfer = np.nan_to_num(np.array([_finite(r.get("outline_chamfer_px")) for r in ok]), nan=np.inf)
+    margin = np.nan_to_num(np.array([_finite(r.get("outline_margin_px")) for r in ok]), nan=-np.inf)
+    e_t = np.array([_finite(r.get("e_t")) for r in ok])
+    e_r = np.array([_finite(r.get("e_R")) for r in ok])
+    flip = e_r > FLIP_DEG
+    wrong = (e_t > max_e_t) | (e_r > max_e_r)
+    table = []
+    for c, m in itertools.product(chamfers, margins):
+        keep = (chamfer <= c) & (margin >= m)
+        good = keep & ~flip
+        table.append({"max_chamfer_px": float(c), "min_margin_px": float(m), "kept": int(keep.sum()),
+                      "flips": int((keep & flip).sum()), "wrong": int((keep & wrong).sum()),
+                      "e_t_mean": float(np.mean(e_t[good])) if good.any() else float("nan"),
+                      "e_R_mean": float(np.mean(e_r[good])) if good.any() else float("nan")})
+    return table
+
+
+def propose_outline(table: list[dict[str, float]]) -> dict[str, float] | None:
+    """The outline gates keeping the most poses with no flip (stricter on ties); None if none keeps any."""
+    safe = [r for r in table if r["flips"] == 0 and r["kept"] > 0]
+    if not safe:
+        return None
+    return max(safe, key=lambda r: (r["kept"], -r["max_chamfer_px"], r["min_margin_px"]))
+
+
 def propose(table: list[dict[str, float]]) -> dict[str, float] | None:
     """The row keeping the most poses with no flip and no wrong pose (stricter on ties); None if none keeps any."""
     safe = [r for r in table if r["flips"] == 0 and r["wrong"] == 0 and r["kept"] > 0]
@@ -77,11 +113,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--taus", type=float, nargs="*", default=None,
                    help="also try these max depth tolerances (m; registration bundles: max_tau_m)")
     p.add_argument("--margins", type=float, nargs="*", default=None, help="min_flip_margin grid")
+    p.add_argument("--outline", action="store_true", help="the silhouette gates instead (module docstring)")
     args = p.parse_args(argv)
     report = json.loads(args.report.read_text())
     if report.get("split") == "test":
         raise SystemExit("calibrate on train frames, not the test split")
     rows = report["frames"]
+    if args.outline:
+        return _main_outline(args, report, rows)
     confidences = [0.0, 0.3, 0.5, 0.6, 0.7, 0.8, 0.9]
     margins = args.margins or [0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.08]
     taus = args.taus or [math.inf]
@@ -100,6 +139,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"report": str(args.report), "max_e_t": args.max_e_t, "max_e_r": args.max_e_r,
                                         "table": table, "proposed": best}, indent=2))
+    return 0
+
+
+def _main_outline(args: argparse.Namespace, report: dict[str, Any], rows: list[dict[str, Any]]) -> int:
+    chamfers = [0.6, 0.8, 1.0, 1.2, 1.5, 2.0]
+    margins = args.margins or [0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0]
+    table = outline_gate_table(rows, chamfers, margins, args.max_e_t, args.max_e_r)
+    best = propose_outline(table)
+    print(f"{sum(1 for r in rows if r.get('valid'))} of {len(rows)} {report.get('split')} frames valid with the gates open")
+    print("| max_chamfer_px | min_margin_px | kept | flips | wrong | e_t mean m | e_R mean ° |\n|---|---|---|---|---|---|---|")
+    for r in table:
+        print(f"| {r['max_chamfer_px']:.1f} | {r['min_margin_px']:.2f} | {r['kept']} | {r['flips']} | {r['wrong']} "
+              f"| {r['e_t_mean']:.3f} | {r['e_R_mean']:.2f} |")
+    print("proposed:", "none (no pair keeps a pose without a flip)" if best is None else
+          f"max_chamfer_px {best['max_chamfer_px']}, min_margin_px {best['min_margin_px']} ({best['kept']} poses kept)")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"report": str(args.report), "max_e_t": args.max_e_t, "max_e_r": args.max_e_r,
+                                        "outline": True, "table": table, "proposed": best}, indent=2))
     return 0
 
 

@@ -225,6 +225,8 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
         row = {"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "valid": bool(result.valid),
                "status": result.status, "confidence": float(result.confidence), "wall_ms": wall, **err,
                "flip_margin": float(result.flip_margin), "depth_tolerance_m": float(result.depth_tolerance_m),
+               "outline_chamfer_px": float(result.outline_chamfer_px),
+               "outline_margin_px": float(result.outline_margin_px),
                "R": np.asarray(result.R).tolist(), "t": np.asarray(result.t).tolist()}
         rows.append(row)
         if classical is not None:

@@ -52,7 +52,9 @@ def test_writes_samples_on_the_mesh_with_unit_normals(bundle_copy):
     before = json.loads((DEFAULT / "bundle.json").read_text())
     after = json.loads((bundle_copy / "bundle.json").read_text())
     assert after["stereo"] == before["stereo"] and after["pose"] == before["pose"]
-    assert main(["export-surface", str(bundle_copy), "--count", "500", "--no-registration"]) == 0
+    # the silhouette stage decides between registered poses: it cannot stay without the registration
+    assert main(["export-surface", str(bundle_copy), "--count", "500", "--no-registration"]) == 2
+    assert main(["export-surface", str(bundle_copy), "--count", "500", "--no-registration", "--no-silhouette"]) == 0
     assert load_bundle(bundle_copy).registration is None
 
 
@@ -74,4 +76,38 @@ def test_bad_arguments_are_refused(bundle_copy, argv):
     text = (bundle_copy / "bundle.json").read_text()
     with pytest.raises(SystemExit):
         main(["export-surface", str(bundle_copy), *argv])
+    assert (bundle_copy / "bundle.json").read_text() == text
+
+
+def test_writes_outline_samples_and_the_silhouette_section(bundle_copy):
+    from spacepose.tools.targets import load_target
+
+    assert main(["export-surface", str(bundle_copy), "--count", "300", "--silhouette-count", "2000",
+                 "--silhouette", "max_chamfer_px=1.5", "min_margin_px=0.25"]) == 0
+    b = load_bundle(bundle_copy)
+    assert b.silhouette_points.shape == (2000, 3)
+    assert b.silhouette.max_chamfer_px == 1.5 and b.silhouette.min_margin_px == 0.25
+    # trimesh's seeded area-uniform draw (seed + 1, rounded to the mm), not the surface samples again
+    import trimesh
+
+    points, _ = trimesh.sample.sample_surface(load_target(b.target_name).mesh, 2000, seed=1)
+    np.testing.assert_allclose(b.silhouette_points, points, atol=6e-4)
+    assert not np.allclose(b.silhouette_points[:300], b.surface_points[:300])
+    # a later call that does not name them keeps the samples and the section
+    assert main(["export-surface", str(bundle_copy), "--count", "300"]) == 0
+    assert load_bundle(bundle_copy).silhouette_points.shape == (2000, 3)
+    assert main(["export-surface", str(bundle_copy), "--count", "300", "--no-silhouette"]) == 0
+    b = load_bundle(bundle_copy)
+    assert b.silhouette is None and b.silhouette_points.shape == (0, 3)
+
+
+@pytest.mark.parametrize("argv", [["--silhouette-count", "50"], ["--no-silhouette", "--silhouette-count", "500"],
+                                  ["--silhouette", "max_chamfer_px=-1"], ["--no-registration", "--silhouette"]])
+def test_bad_silhouette_arguments_leave_the_bundle_as_it_was(bundle_copy, argv):
+    text = (bundle_copy / "bundle.json").read_text()
+    try:
+        code = main(["export-surface", str(bundle_copy), "--count", "100", *argv])
+    except (SystemExit, BundleError):
+        code = None
+    assert code != 0
     assert (bundle_copy / "bundle.json").read_text() == text

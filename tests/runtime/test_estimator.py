@@ -106,6 +106,22 @@ def test_prior_that_lost_the_target_falls_back_to_the_coarse_pass(estimator, ste
     assert result.timings_ms["stereo"] > 0
 
 
+@pytest.mark.parametrize("status, passes", [("weak_votes", 1), ("no_target", 2), ("fit_residual", 2),
+                                            ("too_few_points", 2), ("out_of_range", 2)])
+def test_only_a_window_that_lost_the_target_is_run_again(estimator, monkeypatch, status, passes):
+    """A frame that found the target in the prior window but cannot tell its pose from the flip
+    (weak_votes) would find the same target with the coarse pass, at twice the cost."""
+    from spacepose.stereo_stage import RoiHint
+
+    calls = []
+    monkeypatch.setattr(estimator, "_roi_hint", lambda: RoiHint((200, 150, 440, 330), 20.0, 40.0))
+    monkeypatch.setattr(estimator, "_pose_from_pair",
+                        lambda left, right, hint, timer: calls.append(hint) or (status, None, None, "stub"))
+    result = estimator.estimate(*synthetic_pair())
+    assert len(calls) == passes and result.status == status and not result.valid
+    assert calls[0] is not None and (passes == 1 or calls[1] is None)
+
+
 @pytest.mark.parametrize("surface, valid", [
     # a dense grid filling the space around the object: every observed point lies "on" it
     (np.stack(np.meshgrid(*[np.arange(-4.0, 4.01, 0.3)] * 3, indexing="ij"), -1).reshape(-1, 3), True),

@@ -44,3 +44,29 @@ def test_cli_refuses_test_split_and_writes_json(tmp_path, capsys):
     assert main([str(report), "--out", str(tmp_path / "g.json")]) == 0
     assert json.loads((tmp_path / "g.json").read_text())["proposed"]["kept"] == 2
     assert "proposed: min_confidence" in capsys.readouterr().out
+
+
+OUTLINE_ROWS = [
+    {"valid": True, "outline_chamfer_px": 0.7, "outline_margin_px": 0.8, "e_t": 0.1, "e_R": 2.0},
+    {"valid": True, "outline_chamfer_px": 1.1, "outline_margin_px": 0.5, "e_t": 0.2, "e_R": 3.0},
+    {"valid": True, "outline_chamfer_px": 0.9, "outline_margin_px": 0.15, "e_t": 0.2, "e_R": 179.0},  # flip, small gap
+    {"valid": True, "outline_chamfer_px": 1.9, "outline_margin_px": 0.9, "e_t": 0.3, "e_R": 176.0},   # flip, poor fit
+    {"valid": True, "outline_chamfer_px": None, "outline_margin_px": None, "e_t": 0.1, "e_R": 1.0},   # stage off
+    {"valid": False, "outline_chamfer_px": 0.5, "outline_margin_px": 2.0, "e_t": None, "e_R": None},
+]
+
+
+def test_outline_table_and_proposal(tmp_path, capsys):
+    from spacepose.tools.calibrate_gates import outline_gate_table, propose_outline
+
+    table = outline_gate_table(OUTLINE_ROWS, [1.2, 2.0], [0.1, 0.3], max_e_t=0.5, max_e_r=20.0)
+    wide = next(r for r in table if r["max_chamfer_px"] == 2.0 and r["min_margin_px"] == 0.1)
+    assert (wide["kept"], wide["flips"]) == (4, 2)
+    best = propose_outline(table)
+    assert (best["max_chamfer_px"], best["min_margin_px"], best["kept"]) == (1.2, 0.3, 2)
+    assert best["e_R_mean"] == pytest.approx(2.5)
+    report = tmp_path / "r.json"
+    report.write_text(json.dumps({"split": "train", "frames": OUTLINE_ROWS}))
+    assert main([str(report), "--outline", "--margins", "0.1", "0.3", "--out", str(tmp_path / "g.json")]) == 0
+    assert json.loads((tmp_path / "g.json").read_text())["proposed"]["min_margin_px"] == 0.3
+    assert "proposed: max_chamfer_px" in capsys.readouterr().out

@@ -1,0 +1,352 @@
+"""Silhouette refinement: which of a pose and its flip the target's outline shows (numpy + OpenCV).
+
+The stereo points cannot tell the shipped target (``tdrs``) from its 180° flip about body z: the
+flip moves 4 % of the surface, by at most 0.9 m, and the depth tolerance at 30 m is 0.5 m. The
+outline can: the flip puts a 0.5 m dish and a 1 m boom on the other side, several pixels at 50 m.
+But the outline of a pose 5–10° off (what registration gives) differs from the image by more than
+the flip does, so each candidate is first refined against the outline, then the two are compared.
+
+*Observed outline*: the pixels the stereo disparity puts nearer than the far end of the target
+(``d > f B / (distance + margin)``); space and the Earth sit at zero disparity. This is the stereo
+graph's own mask, so it does not depend on the image's brightness or on the renderer's materials.
+
+*Model outline*: the object-frame silhouette samples (``target.silhouette_points`` of the bundle,
+area-uniform, dense enough to leave no holes at the working scale) projected and splatted into a
+:class:`SilhouetteFrame` — the stereo window, downscaled to at most ``max_side_px``. Contour
+samples are those that land on the splat's boundary.
+
+*Refinement* (:func:`refine_outline`): Gauss-Newton on the 6-DoF pose, residuals of two kinds,
+each group weighted by the inverse of its count and its noise: every contour sample to the nearest
+observed contour pixel (2-D, pixels of the silhouette frame; pairs beyond ``trunc_px`` dropped),
+and every stereo point to the surface at the pose (point-to-plane over ``tau``, which keeps the
+depth that the outline alone fixes poorly).
+
+*Decision* (:func:`decide_outline`): the symmetric chamfer distance of the refined outline to the
+observed one for both candidates. The lower wins; the gap is the margin. Both are measured in
+*outline pixels*: pixels of a ``max_side_px`` view of the stereo window, whatever its size. The
+window is a fixed multiple of the target's extent, so an outline pixel is a fixed fraction of the
+target: the parts the flip moves are as many outline pixels across at 10 m as at 50 m, at
+640x480 as at 1280x960, and one gate serves every distance and rig (a far target, seen smaller
+than ``max_side_px``, gets a proportionally stricter gate in image pixels).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import cv2
+import numpy as np
+
+from .errors import check_shape
+from .registration import SurfaceModel, exp_so3, rotation_angle_deg
+
+__all__ = ["SilhouetteConfig", "SilhouetteFrame", "OutlineFit", "OutlineDecision", "silhouette_frame",
+           "splat_mask", "observed_mask", "contour", "chamfer_px", "refine_outline", "decide_outline"]
+
+_KERNEL = np.ones((3, 3), np.uint8)
+
+
+@dataclass(frozen=True)
+class SilhouetteConfig:
+    """Settings of the silhouette stage (bundle ``silhouette`` section).
+
+    max_side_px: side of the silhouette frame (the stereo window downscaled to it, never upscaled).
+    iterations: Gauss-Newton steps per candidate. trunc_px: contour pairs farther apart than this
+        (silhouette-frame pixels) are left out of a step. contour_points, stereo_points: most
+        residuals of each kind per step (fixed-seed subsamples). sigma_px: contour noise (frame px).
+        reverse: 1 adds the observed-to-model contour pairs (each observed contour pixel to the
+        nearest model contour sample) to the model-to-observed ones; 0 leaves them out.
+    stop_rad, stop_m: a step smaller than both (rotation, translation) ends the refinement.
+    depth_margin_m: the observed mask keeps pixels nearer than ``distance + depth_margin_m``.
+    max_chamfer_px: the winner's chamfer distance (outline px, module docstring) above which its outline does not
+        match the image well enough to decide anything. min_margin_px: least chamfer gap between
+        the two candidates for a decision.
+    """
+
+    max_side_px: int = 192
+    iterations: int = 8
+    trunc_px: float = 8.0
+    contour_points: int = 800
+    stereo_points: int = 300
+    sigma_px: float = 1.0
+    depth_margin_m: float = 4.0
+    max_chamfer_px: float = 1.2
+    min_margin_px: float = 0.2
+    reverse: int = 1
+    stop_rad: float = 2e-4
+    stop_m: float = 2e-3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.max_side_px < 16 or self.iterations < 0 or self.contour_points < 12 or self.stereo_points < 0:
+            raise ValueError(f"invalid silhouette config {self}")
+        if not (self.trunc_px > 0 and self.sigma_px > 0 and self.depth_margin_m >= 0):
+            raise ValueError(f"invalid silhouette config {self}")
+
+
+@dataclass(frozen=True)
+class SilhouetteFrame:
+    """A full-frame box ``(x0, y0)`` + ``side`` seen at ``scale`` (frame px per full-frame px).
+
+    ``K``: (3, 3) intrinsics of the frame; ``size``: its side in pixels.
+    """
+
+    x0: int
+    y0: int
+    side: int
+    scale: float
+    K: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return max(1, int(round(self.side * self.scale)))
+
+
+def silhouette_frame(K_full: np.ndarray, x0: int, y0: int, side: int, max_side_px: int) -> SilhouetteFrame:
+    """The frame of the full-frame box ``(x0, y0, side)`` downscaled to at most ``max_side_px``."""
+    check_shape(K_full, (3, 3), "K_full")
+    side = max(1, int(side))
+    scale = min(1.0, max_side_px / side)
+    size = max(1, int(round(side * scale)))
+    s = size / side
+    K = np.asarray(K_full, dtype=np.float64).copy()
+    K[0, 0] *= s
+    K[1, 1] *= s
+    K[0, 2] = (K[0, 2] - x0 + 0.5) * s - 0.5
+    K[1, 2] = (K[1, 2] - y0 + 0.5) * s - 0.5
+    return SilhouetteFrame(int(x0), int(y0), side, s, K)
+
+
+def _project(X_cam: np.ndarray, K: np.ndarray) -> np.ndarray:
+    z = np.maximum(X_cam[:, 2], 1e-6)
+    return np.stack([K[0, 0] * X_cam[:, 0] / z + K[0, 2], K[1, 1] * X_cam[:, 1] / z + K[1, 2]], axis=1)
+
+
+def splat_mask(points: np.ndarray, R: np.ndarray, t: np.ndarray, frame: SilhouetteFrame
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Splat the object-frame ``points`` (S, 3) at pose (R, t) into ``frame`` (computed in the
+    points' dtype: float32 points halve the cost, at 1e-4 px).
+
+    Returns ``(mask (n, n) uint8 after a 3x3 closing, pixel (S, 2) int column/row, inside (S,) bool)``.
+    """
+    n = frame.size
+    R32, t32 = np.asarray(R, dtype=points.dtype), np.asarray(t, dtype=points.dtype)
+    uv = _project(points @ R32.T + t32, frame.K.astype(points.dtype))
+    ij = np.rint(uv).astype(np.int32)
+    inside = (ij[:, 0] >= 0) & (ij[:, 0] < n) & (ij[:, 1] >= 0) & (ij[:, 1] < n)
+    mask = np.zeros((n, n), np.uint8)
+    mask[ij[inside, 1], ij[inside, 0]] = 1
+    return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _KERNEL), ij, inside
+
+
+def observed_mask(disparity: np.ndarray, frame: SilhouetteFrame, min_disparity: float) -> np.ndarray:
+    """(n, n) uint8: full-frame ``disparity`` (H, W) > ``min_disparity`` over ``frame``'s box."""
+    check_shape(disparity, (None, None), "disparity")
+    h, w = disparity.shape
+    x0, y0, side = frame.x0, frame.y0, frame.side
+    crop = np.zeros((side, side), np.float32)
+    xa, ya, xb, yb = max(x0, 0), max(y0, 0), min(x0 + side, w), min(y0 + side, h)
+    if xb > xa and yb > ya:
+        crop[ya - y0:yb - y0, xa - x0:xb - x0] = disparity[ya:yb, xa:xb] > min_disparity
+    n = frame.size
+    if n != side:
+        crop = cv2.resize(crop, (n, n), interpolation=cv2.INTER_AREA)
+    return (crop > 0.5).astype(np.uint8)
+
+
+def contour(mask: np.ndarray) -> np.ndarray:
+    """(n, n) bool: pixels of ``mask`` with a background 8-neighbour (or on the frame's edge)."""
+    padded = cv2.copyMakeBorder(mask, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    return (mask > 0) & (cv2.erode(padded, _KERNEL)[1:-1, 1:-1] == 0)
+
+
+def _outline_unit(frame: SilhouetteFrame, config: SilhouetteConfig) -> float:
+    """Frame pixels per outline pixel (module docstring): 1 for a window downscaled to the frame."""
+    return frame.size / float(config.max_side_px)
+
+
+def _distance_to(edge: np.ndarray) -> np.ndarray:
+    return cv2.distanceTransform((~edge).astype(np.uint8), cv2.DIST_L2, 3)
+
+
+def chamfer_px(mask: np.ndarray, observed: np.ndarray, cap_px: float, scale: float = 1.0) -> float:
+    """Symmetric mean contour distance of two masks, each distance capped at ``cap_px`` (pixels of
+    the masks), divided by ``scale`` (e.g. mask px per outline px); ``cap_px / scale`` when either
+    contour is empty."""
+    a, b = contour(mask), contour(observed)
+    if not a.any() or not b.any():
+        return cap_px / scale
+    d_ab = np.minimum(_distance_to(b)[a], cap_px).mean()
+    d_ba = np.minimum(_distance_to(a)[b], cap_px).mean()
+    return float(0.5 * (d_ab + d_ba) / scale)
+
+
+@dataclass(frozen=True, eq=False)
+class OutlineFit:
+    """A pose refined against the outline: ``R``, ``t``, its ``chamfer_px`` (outline px, module docstring)."""
+
+    R: np.ndarray
+    t: np.ndarray
+    chamfer_px: float
+
+
+def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, observed: np.ndarray,
+                   frame: SilhouetteFrame, config: SilhouetteConfig = SilhouetteConfig(), *,
+                   stereo_points: np.ndarray | None = None, surface: SurfaceModel | None = None,
+                   tau_m: float = 0.5) -> OutlineFit:
+    """Gauss-Newton refinement of (R, t) against the ``observed`` (n, n) outline (module docstring).
+
+    ``stereo_points`` (N, 3, camera frame) with the target's ``surface`` add the point-to-plane
+    residuals (noise ``tau_m``). A step that the data cannot support (too few residuals, a
+    singular system) ends the refinement; the pose so far is returned.
+    """
+    check_shape(silhouette_points, (None, 3), "silhouette_points")
+    check_shape(observed, (frame.size, frame.size), "observed")
+    if silhouette_points.dtype not in (np.float32, np.float64):
+        silhouette_points = silhouette_points.astype(np.float64)
+    R = np.asarray(R, dtype=np.float64).copy()
+    t = np.asarray(t, dtype=np.float64).copy()
+    Kf = frame.K
+    edge = contour(observed)
+    dist, labels = cv2.distanceTransformWithLabels((~edge).astype(np.uint8), cv2.DIST_L2, 5,
+                                                   labelType=cv2.DIST_LABEL_PIXEL)
+    ey, ex = np.nonzero(edge)   # label k (1-based) is the k-th edge pixel in row-major order
+    rng = np.random.default_rng(config.seed)
+    P = None
+    if stereo_points is not None and surface is not None and config.stereo_points > 0:
+        P = np.asarray(stereo_points, dtype=np.float64)
+        P = P[np.all(np.isfinite(P), axis=1)]
+        P = P[rng.permutation(len(P))[: config.stereo_points]] if len(P) >= 12 else None
+    if len(ey) >= 12:
+        for _ in range(config.iterations):
+            mask, ij, inside = splat_mask(silhouette_points, R, t, frame)
+            on = np.flatnonzero(inside)
+            on = on[contour(mask)[ij[on, 1], ij[on, 0]]]
+            if len(on) < 12:
+                break
+            # model contour -> nearest observed contour pixel
+            fwd = on[dist[ij[on, 1], ij[on, 0]] < config.trunc_px]
+            k = labels[ij[fwd, 1], ij[fwd, 0]] - 1
+            fwd_target = np.stack([ex[k], ey[k]], axis=1)
+            if config.reverse:
+                # observed contour pixel -> nearest model contour sample (pulls the model over what it misses)
+                ids = np.full(mask.shape, -1, np.int64)
+                ids[ij[on, 1], ij[on, 0]] = on
+                m_edge = ids >= 0
+                m_dist, m_lab = cv2.distanceTransformWithLabels((~m_edge).astype(np.uint8), cv2.DIST_L2, 5,
+                                                                labelType=cv2.DIST_LABEL_PIXEL)
+                my, mx = np.nonzero(m_edge)
+                near = m_dist[ey, ex] < config.trunc_px
+                kk = m_lab[ey[near], ex[near]] - 1
+                rev = ids[my[kk], mx[kk]]
+                rev_target = np.stack([ex[near], ey[near]], axis=1)
+                fwd, fwd_target = np.concatenate([fwd, rev]), np.concatenate([fwd_target, rev_target])
+            if len(fwd) < 12:
+                break
+            if len(fwd) > config.contour_points:
+                pick = rng.choice(len(fwd), config.contour_points, replace=False)
+                fwd, fwd_target = fwd[pick], fwd_target[pick]
+            on, target = fwd, fwd_target.astype(np.float64)
+            Xc = silhouette_points[on].astype(np.float64) @ R.T + t
+            X, Y, z = Xc[:, 0], Xc[:, 1], Xc[:, 2]
+            x, y = X / z, Y / z
+            fx, fy = Kf[0, 0], Kf[1, 1]
+            r = np.stack([fx * x + Kf[0, 2], fy * y + Kf[1, 2]], axis=1) - target      # (C, 2) px
+            # image Jacobian of X_c' = exp(w) X_c + v at (w, v) = 0: rows u, v; columns w, v
+            J = np.empty((len(on), 2, 6))
+            J[:, 0, 0], J[:, 0, 1], J[:, 0, 2] = -fx * x * y, fx * (1.0 + x * x), -fx * y
+            J[:, 0, 3], J[:, 0, 4], J[:, 0, 5] = fx / z, 0.0, -fx * x / z
+            J[:, 1, 0], J[:, 1, 1], J[:, 1, 2] = -fy * (1.0 + y * y), fy * x * y, fy * x
+            J[:, 1, 3], J[:, 1, 4], J[:, 1, 5] = 0.0, fy / z, -fy * y / z
+            J = J.reshape(-1, 6)
+            wc = 1.0 / (len(on) * config.sigma_px ** 2)
+            H = wc * J.T @ J
+            g = wc * J.T @ r.reshape(-1)
+            if P is not None:
+                Xo = (P - t) @ R                                             # R^T (P - t)
+                q, nrm, d = surface.query(Xo, 3.0 * tau_m)
+                ok = np.isfinite(d)
+                if ok.sum() >= 12:
+                    qc = q[ok] @ R.T + t
+                    nc = nrm[ok] @ R.T
+                    e = np.einsum("ij,ij->i", nc, qc - P[ok])                # model minus data along n
+                    Js = np.concatenate([np.cross(qc, nc), nc], axis=1)      # d e / d(w, v)
+                    ws = 1.0 / (ok.sum() * tau_m ** 2)
+                    H += ws * Js.T @ Js
+                    g += ws * Js.T @ e
+            H += 1e-9 * np.trace(H) * np.eye(6) + 1e-12 * np.eye(6)
+            try:
+                step = -np.linalg.solve(H, g)
+            except np.linalg.LinAlgError:
+                break
+            if not np.all(np.isfinite(step)):
+                break
+            dR = exp_so3(step[:3])
+            R, t = dR @ R, dR @ t + step[3:]
+            if np.linalg.norm(step[:3]) < config.stop_rad and np.linalg.norm(step[3:]) < config.stop_m:
+                break
+    mask, _, _ = splat_mask(silhouette_points, R, t, frame)
+    return OutlineFit(R=R, t=t, chamfer_px=chamfer_px(mask, observed, config.trunc_px, _outline_unit(frame, config)))
+
+
+@dataclass(frozen=True, eq=False)
+class OutlineDecision:
+    """Candidates refined: ``best`` (lowest chamfer), ``other`` (the best more than 90° from it, NaN
+    pose when none), ``margin_px`` between them; ``best_index``: which input candidate won
+    (``len(candidates)``: the flip of the best one); ``turned_deg``: angle between the two."""
+
+    best: OutlineFit
+    other: OutlineFit
+    best_index: int
+    margin_px: float
+    turned_deg: float
+
+    def decided(self, config: SilhouetteConfig) -> bool:
+        """Whether the outline picks ``best`` (fine enough fit, clear enough gap)."""
+        return self.best.chamfer_px <= config.max_chamfer_px and self.margin_px >= config.min_margin_px
+
+
+def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_points: np.ndarray,
+                   disparity: np.ndarray, K_full: np.ndarray, baseline_m: float, window: tuple[int, int, int],
+                   config: SilhouetteConfig = SilhouetteConfig(), *, stereo_points: np.ndarray | None = None,
+                   surface: SurfaceModel | None = None, tau_m: float = 0.5, target_radius_m: float = 0.0,
+                   flip: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+                   ) -> OutlineDecision:
+    """Refine candidate poses against the outline the ``disparity`` (H, W) shows in ``window``
+    (full-frame ``x0, y0, side``) and say which fits it best (module docstring).
+
+    ``flip`` (pose -> its 180° flip): after the candidates, the flip of the best refined pose is
+    refined too. A candidate too far from the truth for the refinement to reach it can leave its
+    flip the better fit; the flip of that precise wrong pose is a precise right one, and the
+    comparison is then between two converged poses. The margin is measured against the best pose
+    more than 90° from the winner (``cap`` when there is none).
+    """
+    if not candidates:
+        raise ValueError("decide_outline needs at least one candidate")
+    check_shape(disparity, (None, None), "disparity")
+    frame = silhouette_frame(K_full, *window, config.max_side_px)
+    distance = float(np.mean([np.linalg.norm(t) for _, t in candidates]))
+    far = distance + max(target_radius_m, 0.0) + config.depth_margin_m
+    observed = observed_mask(np.asarray(disparity, dtype=np.float32), frame,
+                             float(K_full[0, 0]) * float(baseline_m) / max(far, 1e-6))
+
+    def fit(R: np.ndarray, t: np.ndarray) -> OutlineFit:
+        return refine_outline(R, t, silhouette_points, observed, frame, config, stereo_points=stereo_points,
+                              surface=surface, tau_m=tau_m)
+
+    fits = [fit(R, t) for R, t in candidates]
+    if flip is not None:
+        best = min(fits, key=lambda f: f.chamfer_px)
+        fits.append(fit(*flip(best.R, best.t)))
+    order = sorted(range(len(fits)), key=lambda i: fits[i].chamfer_px)
+    best = fits[order[0]]
+    turned = [float(rotation_angle_deg(best.R, fits[i].R)) for i in order[1:]]
+    rivals = [i for i, a in zip(order[1:], turned) if a > 90.0]
+    cap = config.trunc_px / _outline_unit(frame, config)
+    other = fits[rivals[0]] if rivals else OutlineFit(R=np.full((3, 3), np.nan), t=np.full(3, np.nan), chamfer_px=cap)
+    margin = other.chamfer_px - best.chamfer_px
+    return OutlineDecision(best=best, other=other, best_index=min(order[0], len(candidates)),
+                           margin_px=float(margin) if math.isfinite(margin) else 0.0,
+                           turned_deg=float(rotation_angle_deg(best.R, other.R)) if rivals else float("nan"))

@@ -1,0 +1,242 @@
+"""Tests of spacepose.silhouette: the frame, the splat, the observed mask, outline refinement, the decision."""
+
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # --import-mode=importlib: find the helpers
+from _bundle_fixtures import make_bundle, manifest  # noqa: E402
+
+from spacepose.bundle import load_bundle  # noqa: E402
+from spacepose.errors import BundleError, ShapeError  # noqa: E402
+from spacepose.flip import flipped_pose  # noqa: E402
+from spacepose.registration import SurfaceModel, rotation_angle_deg  # noqa: E402
+from spacepose.silhouette import (SilhouetteConfig, chamfer_px, contour, decide_outline, observed_mask,  # noqa: E402
+                                  refine_outline, silhouette_frame, splat_mask)
+
+K = np.array([[800.0, 0, 319.5], [0, 800.0, 239.5], [0, 0, 1]])
+CENTRE = np.zeros(3)
+
+
+def _slab(lo, hi, n_per_m2, rng):
+    """Area-uniform samples and outward normals of the faces of the box ``lo``..``hi``."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    pts, nrm = [], []
+    for axis in range(3):
+        a, b = [i for i in range(3) if i != axis]
+        m = max(16, int((hi[a] - lo[a]) * (hi[b] - lo[b]) * n_per_m2))
+        for side, value in ((-1.0, lo[axis]), (1.0, hi[axis])):
+            p = np.empty((m, 3))
+            p[:, a] = rng.uniform(lo[a], hi[a], m)
+            p[:, b] = rng.uniform(lo[b], hi[b], m)
+            p[:, axis] = value
+            n = np.zeros((m, 3))
+            n[:, axis] = side
+            pts.append(p)
+            nrm.append(n)
+    return np.vstack(pts), np.vstack(nrm)
+
+
+@pytest.fixture(scope="module")
+def plate():
+    """A 4 x 2 x 0.4 m plate with a 1 x 0.8 m tab on one short side, off centre: its half turn about
+    z moves the tab to the other side (the outline tells the two apart, a depth map barely)."""
+    rng = np.random.default_rng(0)
+    p1, n1 = _slab((-2, -1, -0.2), (2, 1, 0.2), 3000, rng)
+    p2, n2 = _slab((2, 0.1, -0.2), (3, 0.9, 0.2), 3000, rng)
+    return np.vstack([p1, p2]), np.vstack([n1, n2])
+
+
+def _pose(deg=(20, -15, 30), t=(0.3, -0.2, 20.0)):
+    return Rotation.from_euler("xyz", deg, degrees=True).as_matrix(), np.asarray(t, float)
+
+
+def _disparity_of(points, R, t, shape=(480, 640), baseline=1.0):
+    """A full-frame disparity map holding the target's splat at its disparity (0 elsewhere)."""
+    frame = silhouette_frame(K, 0, 0, max(shape), 4096)
+    mask, _, _ = splat_mask(points, R, t, frame)
+    disp = np.zeros(shape, np.float32)
+    disp[mask[: shape[0], : shape[1]] > 0] = K[0, 0] * baseline / float(t[2])
+    return disp
+
+
+def test_frame_intrinsics_follow_the_crop_and_scale():
+    frame = silhouette_frame(K, 100, 60, 400, 160)
+    assert frame.size == 160 and frame.scale == pytest.approx(0.4)
+    X = np.array([[0.5, -0.3, 12.0], [-1.0, 0.7, 30.0]])
+    u_full = X[:, :2] / X[:, 2:] * K[0, 0] + K[:2, 2]
+    u_frame = X[:, :2] / X[:, 2:] * frame.K[0, 0] + frame.K[:2, 2]
+    np.testing.assert_allclose(u_frame, (u_full - [100, 60] + 0.5) * 0.4 - 0.5, atol=1e-9)
+    assert silhouette_frame(K, 0, 0, 100, 160).scale == 1.0   # never upscaled
+
+
+def test_splat_and_contour_of_a_disc():
+    rng = np.random.default_rng(1)
+    r = np.sqrt(rng.uniform(0, 1, 40000)) * 1.0
+    a = rng.uniform(0, 2 * np.pi, 40000)
+    disc = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
+    frame = silhouette_frame(K, 220, 140, 200, 200)
+    mask, ij, inside = splat_mask(disc, np.eye(3), np.array([0, 0, 20.0]), frame)
+    assert inside.all()
+    radius_px = 800 / 20.0
+    assert mask.sum() == pytest.approx(np.pi * radius_px ** 2, rel=0.05)
+    edge = contour(mask)
+    ys, xs = np.nonzero(edge)
+    centre = frame.K[:2, 2]
+    np.testing.assert_allclose(np.hypot(xs - centre[0], ys - centre[1]), radius_px, atol=1.5)
+
+
+def test_observed_mask_crops_thresholds_and_pads():
+    disp = np.zeros((480, 640), np.float32)
+    disp[200:260, 300:380] = 20.0
+    disp[0:10, 0:10] = 2.0                                  # far: below the threshold
+    frame = silhouette_frame(K, -40, -40, 480, 480)         # reaches beyond the image's corner
+    obs = observed_mask(disp, frame, 5.0)
+    assert obs.shape == (480, 480) and obs.sum() == 60 * 80
+    assert obs[240:300, 340:420].all()
+    small = observed_mask(disp, silhouette_frame(K, -40, -40, 480, 120), 5.0)
+    assert small.shape == (120, 120) and small.sum() == pytest.approx(60 * 80 / 16, rel=0.1)
+    with pytest.raises(ShapeError):
+        observed_mask(np.zeros((4, 4, 3), np.float32), frame, 1.0)
+
+
+def test_chamfer_is_zero_for_the_same_mask_and_grows_with_a_shift():
+    m = np.zeros((100, 100), np.uint8)
+    cv2.rectangle(m, (30, 30), (70, 60), 1, -1)
+    assert chamfer_px(m, m, 8.0) == 0.0
+    shifted = np.roll(m, 3, axis=1)
+    assert 1.0 < chamfer_px(shifted, m, 8.0) <= 3.0
+    assert chamfer_px(shifted, m, 8.0, scale=0.5) == pytest.approx(2 * chamfer_px(shifted, m, 8.0))
+    assert chamfer_px(np.zeros_like(m), m, 8.0, scale=0.5) == 16.0   # nothing to compare: the cap
+
+
+def test_refinement_recovers_a_perturbed_pose(plate):
+    pts, nrm = plate
+    R, t = _pose()
+    disp = _disparity_of(pts, R, t)
+    frame = silhouette_frame(K, 160, 80, 320, 192)
+    obs = observed_mask(disp, frame, 10.0)
+    dR = Rotation.from_rotvec(np.radians(6) * np.array([0.6, -0.5, 0.62])).as_matrix()
+    R0, t0 = dR @ R, t + np.array([0.15, -0.1, 0.3])
+    cam = pts @ R.T + t
+    stereo = cam[np.einsum("ij,ij->i", nrm @ R.T, cam) < 0][::10]
+    fit = refine_outline(R0, t0, pts, obs, frame, SilhouetteConfig(iterations=15), stereo_points=stereo,
+                         surface=SurfaceModel(pts, nrm), tau_m=0.2)
+    start = refine_outline(R0, t0, pts, obs, frame, SilhouetteConfig(iterations=0))
+    assert rotation_angle_deg(fit.R, R) < 1.5 < rotation_angle_deg(R0, R)
+    assert np.linalg.norm(fit.t - t) < 0.1
+    assert fit.chamfer_px < 0.6 < start.chamfer_px
+
+
+def test_the_outline_tells_the_pose_from_its_flip(plate):
+    pts, nrm = plate
+    R, t = _pose()
+    disp = _disparity_of(pts, R, t)
+    dR = Rotation.from_rotvec(np.radians(4) * np.array([0.0, 0.6, 0.8])).as_matrix()
+    near = (dR @ R, t + np.array([0.1, 0.05, 0.0]))
+    flip = flipped_pose(*near, CENTRE, "z")
+    config = SilhouetteConfig(iterations=12)
+    for order in ([near, flip], [flip, near]):
+        dec = decide_outline(order, pts, disp, K, 1.0, (160, 80, 320), config,
+                             flip=lambda R_, t_: flipped_pose(R_, t_, CENTRE, "z"))
+        assert rotation_angle_deg(dec.best.R, R) < 2.0
+        assert dec.turned_deg > 150.0
+        assert dec.margin_px > 1.0 and dec.decided(config)
+
+
+def test_the_flip_of_the_best_fit_rescues_a_candidate_too_far_to_converge(plate):
+    pts, _ = plate
+    R, t = _pose()
+    disp = _disparity_of(pts, R, t)
+    config = SilhouetteConfig(iterations=12)
+    # only the flipped pose is offered: the refined flip of the refined flip is the answer
+    only_flip = [flipped_pose(R, t, CENTRE, "z")]
+    dec = decide_outline(only_flip, pts, disp, K, 1.0, (160, 80, 320), config,
+                         flip=lambda R_, t_: flipped_pose(R_, t_, CENTRE, "z"))
+    # (the outline alone fixes the tilt of a plate seen face-on only loosely: a few degrees)
+    assert dec.best_index == 1 and rotation_angle_deg(dec.best.R, R) < 5.0 and dec.best.chamfer_px < 0.8
+    # without the flip there is no rival: the margin is the cap, and the (wrong) pose is what it is
+    alone = decide_outline(only_flip, pts, disp, K, 1.0, (160, 80, 320), config)
+    assert alone.best_index == 0 and np.isnan(alone.turned_deg) and np.isnan(alone.other.R).all()
+    with pytest.raises(ValueError):
+        decide_outline([], pts, disp, K, 1.0, (160, 80, 320), config)
+
+
+def test_an_empty_outline_decides_nothing(plate):
+    pts, _ = plate
+    R, t = _pose()
+    disp = np.zeros((480, 640), np.float32)                  # the stereo graph saw nothing
+    config = SilhouetteConfig()
+    dec = decide_outline([(R, t), flipped_pose(R, t, CENTRE, "z")], pts, disp, K, 1.0, (160, 80, 320), config)
+    assert not dec.decided(config)
+    np.testing.assert_allclose(dec.best.R, R, atol=1e-12)      # no step was taken
+
+
+def test_config_refuses_nonsense():
+    for bad in ({"max_side_px": 4}, {"trunc_px": 0.0}, {"contour_points": 3}, {"iterations": -1},
+                {"sigma_px": -1.0}):
+        with pytest.raises(ValueError):
+            SilhouetteConfig(**bad)
+
+
+def _outline_manifest(**section):
+    data = manifest()
+    rng = np.random.default_rng(0)
+    data["target"]["surface_points"] = rng.normal(size=(50, 3)).tolist()
+    data["target"]["silhouette_points"] = rng.normal(size=(200, 3)).tolist()
+    data["registration"] = {}
+    data["silhouette"] = section
+    return data
+
+
+def test_bundle_silhouette_section(tmp_path):
+    bundle = load_bundle(make_bundle(tmp_path / "b", _outline_manifest(max_chamfer_px=1.5, min_margin_px=0.3)))
+    assert bundle.silhouette == SilhouetteConfig(max_chamfer_px=1.5, min_margin_px=0.3)
+    assert bundle.silhouette_points.shape == (200, 3)
+    plain = load_bundle(make_bundle(tmp_path / "plain"))
+    assert plain.silhouette is None and plain.silhouette_points.shape == (0, 3)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: d["silhouette"].update(bogus=1), "unknown keys"),
+    (lambda d: d["silhouette"].update(max_chamfer_px=-1), "max_chamfer_px"),
+    (lambda d: d["silhouette"].update(iterations=1.5), "iterations"),
+    (lambda d: d["target"].update(silhouette_points=[[0, 0, 0]] * 10), "at least 100"),
+    (lambda d: d.pop("registration"), "registration"),
+    (lambda d: d.update(silhouette=[1, 2]), "must be an object"),
+    (lambda d: d["target"].update(silhouette_points=[[0, 0]] * 200), "silhouette_points"),
+])
+def test_bundle_refuses_bad_silhouette_sections(tmp_path, edit, match):
+    data = _outline_manifest()
+    edit(data)
+    with pytest.raises(BundleError, match=match):
+        load_bundle(make_bundle(tmp_path / "b", data))
+
+
+def test_outline_pixels_do_not_depend_on_the_image_resolution(plate):
+    """The same view at 640x480 and 1280x960 (window twice as large): the same chamfer and margin
+    in outline pixels, so one gate serves both rigs."""
+    pts, _ = plate
+    R, t = _pose()
+    start = (Rotation.from_rotvec(np.radians(3) * np.array([0.0, 0.6, 0.8])).as_matrix() @ R, t + [0.05, 0.0, 0.0])
+    K2 = K.copy()
+    K2[:2] *= 2.0
+    K2[:2, 2] += 0.5                         # pixel centres at integers: cx' = (cx + 0.5) * 2 - 0.5
+    frame2 = silhouette_frame(K2, 0, 0, 1280, 4096)
+    mask2, _, _ = splat_mask(pts, R, t, frame2)
+    disp2 = np.zeros((960, 1280), np.float32)
+    disp2[mask2[:960] > 0] = K2[0, 0] / t[2]
+    config = SilhouetteConfig(iterations=0)   # the same pose compared at both resolutions
+    lo = decide_outline([start], pts, _disparity_of(pts, R, t), K, 1.0, (160, 80, 320), config,
+                        flip=lambda R_, t_: flipped_pose(R_, t_, CENTRE, "z"))
+    hi = decide_outline([start], pts, disp2, K2, 1.0, (320, 160, 640), config,
+                        flip=lambda R_, t_: flipped_pose(R_, t_, CENTRE, "z"))
+    assert hi.best.chamfer_px == pytest.approx(lo.best.chamfer_px, rel=0.25, abs=0.1)
+    assert hi.margin_px == pytest.approx(lo.margin_px, rel=0.25)
+    # a far target (window smaller than the frame) is measured on the same scale: stricter in image px
+    far = silhouette_frame(K, 0, 0, 96, 192)
+    assert far.size == 96 and far.scale == 1.0
