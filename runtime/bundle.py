@@ -478,6 +478,24 @@ def _parse_voting(section: Any) -> VotingConfig:
     return VotingConfig(**values)
 
 
+def _config_fields(cls: type, section: Mapping[str, Any], where: str, zero_ints: tuple[str, ...],
+                   zero_numbers: tuple[str, ...]) -> dict[str, Any]:
+    """Every field of the frozen dataclass ``cls`` from ``section`` (its default where absent): integer
+    fields >= 1 (>= 0 for ``zero_ints``), the others finite numbers > 0 (>= any for ``zero_numbers``)."""
+    data = _optional_fields(cls, section, where)
+    defaults = cls()
+    values: dict[str, Any] = {}
+    for name in cls.__dataclass_fields__:
+        default = getattr(defaults, name)
+        value, key = data.get(name, default), f"{where}.{name}"
+        if isinstance(default, int):
+            value = _integer(value, key, minimum=0 if name in zero_ints else 1)
+        else:
+            value = _number(value, key, positive=name not in zero_numbers)
+        values[name] = value
+    return values
+
+
 def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | None:
     if section is None:
         return None
@@ -485,17 +503,8 @@ def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | No
         raise BundleError(f"bundle.json: registration must be an object, got {type(section).__name__}")
     if n_surface < 12:
         raise BundleError("bundle.json: registration needs target.surface_points (at least 12)")
-    data = _optional_fields(RegistrationConfig, section, "registration")
-    defaults = RegistrationConfig()
-    values: dict[str, Any] = {}
-    for name in RegistrationConfig.__dataclass_fields__:
-        default = getattr(defaults, name)
-        value, where = data.get(name, default), f"registration.{name}"
-        if isinstance(default, int):
-            value = _integer(value, where, minimum=0 if name == "seed" else 1)
-        else:
-            value = _number(value, where, positive=name not in ("min_margin", "min_inlier_fraction"))
-        values[name] = value
+    values = _config_fields(RegistrationConfig, section, "registration", zero_ints=("seed",),
+                            zero_numbers=("min_margin", "min_inlier_fraction"))
     if not 0.0 <= values["min_inlier_fraction"] <= 1.0:
         raise BundleError(f"bundle.json: registration.min_inlier_fraction must be in [0, 1], "
                           f"got {values['min_inlier_fraction']!r}")
@@ -514,17 +523,9 @@ def _parse_silhouette(section: Any, n_points: int, has_registration: bool) -> Si
     if n_points < 100 or not has_registration:
         raise BundleError("bundle.json: silhouette needs target.silhouette_points (at least 100) and a registration "
                           "section (it decides between the registered pose and its flip)")
-    data = _optional_fields(SilhouetteConfig, section, "silhouette")
-    defaults = SilhouetteConfig()
-    values: dict[str, Any] = {}
-    for name in SilhouetteConfig.__dataclass_fields__:
-        default = getattr(defaults, name)
-        value, where = data.get(name, default), f"silhouette.{name}"
-        if isinstance(default, int):
-            value = _integer(value, where, minimum=0 if name in ("seed", "iterations", "stereo_points", "reverse") else 1)
-        else:
-            value = _number(value, where, positive=name not in ("depth_margin_m", "min_margin_px"))
-        values[name] = value
+    values = _config_fields(SilhouetteConfig, section, "silhouette",
+                            zero_ints=("seed", "iterations", "stereo_points", "reverse"),
+                            zero_numbers=("depth_margin_m", "min_margin_px"))
     try:
         return SilhouetteConfig(**values)
     except ValueError as err:
