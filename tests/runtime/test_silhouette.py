@@ -240,3 +240,67 @@ def test_outline_pixels_do_not_depend_on_the_image_resolution(plate):
     # a far target (window smaller than the frame) is measured on the same scale: stricter in image px
     far = silhouette_frame(K, 0, 0, 96, 192)
     assert far.size == 96 and far.scale == 1.0
+
+
+# ------------------------------------------------------------------ in the estimator
+def _estimator(tmp_path, registration, silhouette):
+    """The tiny bundle with the synthetic pair's target for registration and outline: its 120 x 80 px
+    rectangle at the tiny stereo graph's disparity (88.8 px, 9.0 m) is a 1.35 x 0.9 m plate."""
+    from _bundle_fixtures import synthetic_pair  # noqa: F401  (the pair these bundles are for)
+
+    from spacepose.calibration.rig import paper_rig
+    from spacepose.estimator import PoseEstimator
+
+    g = np.stack(np.meshgrid(np.linspace(-0.675, 0.675, 28), np.linspace(-0.45, 0.45, 19), indexing="ij"), -1)
+    surface = np.hstack([g.reshape(-1, 2), np.zeros((g.shape[0] * g.shape[1], 1))])
+    rng = np.random.default_rng(0)
+    dense = np.stack([rng.uniform(-0.675, 0.675, 6000), rng.uniform(-0.45, 0.45, 6000), np.zeros(6000)], axis=1)
+    target = dict(manifest()["target"], surface_points=surface.tolist(),
+                  surface_normals=np.tile([0.0, 0.0, 1.0], (len(surface), 1)).tolist(),
+                  silhouette_points=dense.tolist())
+    folder = make_bundle(tmp_path / "b", manifest_overrides={
+        "target": target, "voting": {"min_points": 32, "flip_axis": "z"}, "registration": registration,
+        "silhouette": silhouette})
+    return PoseEstimator(paper_rig(640, 480), bundle=load_bundle(folder), threads=1)
+
+
+def test_the_estimator_decides_by_the_outline(tmp_path):
+    from _bundle_fixtures import synthetic_pair
+
+    left, right = synthetic_pair()
+    # the registration never decides (min_margin 0.99): what is valid, the outline decided
+    est = _estimator(tmp_path, {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0})
+    res = est.estimate(left, right)
+    assert res.valid and res.status == "ok" and "silhouette" in res.timings_ms
+    assert np.isfinite(res.outline_chamfer_px) and res.outline_chamfer_px < 2.0
+    assert abs(abs(res.R[2, 2]) - 1.0) < 0.05 and abs(res.t[2] - 9.0) < 0.5    # the plate, facing the camera
+    # the plate's flip about z is the plate again: no margin, so demanding one leaves the frame undecided
+    strict = _estimator(tmp_path / "s", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 5.0})
+    res = strict.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes" and "the outline does not decide" in res.detail
+    assert np.isfinite(res.outline_margin_px) and res.outline_margin_px < 5.0
+
+
+def test_the_estimator_refuses_a_pose_the_outline_and_the_points_disagree_on(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.silhouette import OutlineDecision, OutlineFit
+
+    left, right = synthetic_pair()
+    est = _estimator(tmp_path, {"min_margin": 0.0}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0})
+    chosen = {}
+
+    def opposite(candidates, *args, **kwargs):
+        R, t = candidates[0]
+        R_f, t_f = flipped_pose(R, t, est.bundle.centre, "z")
+        chosen["R"] = R_f
+        return OutlineDecision(best=OutlineFit(R_f, t_f, 0.5), other=OutlineFit(R, t, 2.0), best_index=1,
+                               margin_px=1.5, turned_deg=180.0)
+
+    monkeypatch.setattr(estimator_module, "decide_outline", opposite)
+    res = est.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes" and "opposite poses" in res.detail
+    # without the registration's own decision, the outline's is the answer
+    est2 = _estimator(tmp_path / "o", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0})
+    res = est2.estimate(left, right)
+    assert res.valid and rotation_angle_deg(res.R, chosen["R"]) < 1e-9 and res.outline_margin_px == 1.5
