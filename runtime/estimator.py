@@ -50,7 +50,7 @@ from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
-from .registration import SurfaceModel, register, rotation_angle_deg, select_with_prior
+from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
 from .silhouette import decide_outline
 
 __all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
@@ -428,7 +428,10 @@ class PoseEstimator:
            one when that refinement fits the outline within ``max_chamfer_px``.
         3. the previous frame's valid pose, when exactly one of the two is near it
            (:func:`spacepose.registration.select_with_prior`): "tracked", confidence
-           ``0.5 * inlier_fraction``.
+           ``0.5 * inlier_fraction``. The outline-refined poses that fit within ``max_chamfer_px``
+           are asked first (they are the more accurate, so they stay within the gates longer); when
+           exactly one of them is near, it is reported, with the registered candidate near the
+           previous pose (if any) to fall back to when the checks after refuse it.
 
         Otherwise the frame is ``weak_votes``. A pose decided by 1 or 2 that is more than 90° from
         the previous frame's valid pose is reported ``weak_votes`` too (one of the two is a flip,
@@ -462,7 +465,7 @@ class PoseEstimator:
         if not lo <= distance <= hi:
             return _stage_invalid(stage, "out_of_range", factors), (
                 f"registered target distance {distance:.1f} m outside {lo:.1f}-{hi:.1f} m")
-        R, t = reg.R, reg.t
+        R, t, fallback = reg.R, reg.t, None
         conclusive = margin >= config.min_margin and reg.tau_m <= config.max_tau_m
         outline = None
         if self._outline_points is not None and stereo.window is not None:
@@ -483,7 +486,11 @@ class PoseEstimator:
             confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
         else:
             tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
-            if tracked is None:
+            refined = []
+            if prior is not None and outline is not None:  # the outline-refined poses fit the tracking gates best
+                refined = [(fit.R, fit.t) for fit in (outline.best, outline.other)
+                           if fit.chamfer_px <= sil.max_chamfer_px and near_prior(fit.R, fit.t, prior[0], prior[1], config)]
+            if tracked is None and len(refined) != 1:
                 why = (f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
                        f"(score gap {margin:.4f} < {config.min_margin:.4f})" if margin < config.min_margin else
                        f"the stereo depth (tolerance {reg.tau_m:.2f} m > {config.max_tau_m:.2f} m) is too coarse "
@@ -493,7 +500,11 @@ class PoseEstimator:
                             f"margin {outline.margin_px:.2f} px)")
                 return _stage_invalid(stage, "weak_votes", factors), (
                     why + ("" if prior is None else "; the previous pose does not pick one"))
-            (R, t), confidence = tracked, 0.5 * reg.inlier_fraction
+            if len(refined) == 1:  # the refined pose near the previous one; the registered one if the checks refuse it
+                (R, t), fallback = refined[0], tracked
+            else:
+                R, t = tracked
+            confidence = 0.5 * reg.inlier_fraction
             factors["tracked"] = 1.0
         if not factors.get("tracked") and prior is not None and (turned := float(rotation_angle_deg(prior[0], R))) > 90.0:
             # decided on its own, yet half turned from the previous frame's valid pose: one of the two is
@@ -503,7 +514,36 @@ class PoseEstimator:
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),
-                                   bandwidth=bandwidth, n_inliers=n_inliers, factors={**stage.factors, **factors}), ""
+                                   bandwidth=bandwidth, n_inliers=n_inliers, factors={**stage.factors, **factors},
+                                   fallback=fallback), ""
+
+    def _verify(self, stage: PoseStageResult, xyz: np.ndarray, left_r: np.ndarray, right_r: np.ndarray,
+                timer: StageTimer, fitness: float | None) -> tuple[str, str] | None:
+        """The checks of a fitted pose against the data: the stereo points on the target's surface
+        (``voting.min_surface_fitness``; ``fitness`` when already known) and the left and right images
+        agreeing there (``voting.min_photo_consistency``). ``(status, detail)`` of the first that fails,
+        else ``None``."""
+        bundle, voting = self.bundle, self.bundle.voting
+        if voting.min_surface_fitness > 0.0 and len(bundle.surface_points):
+            if fitness is None:
+                with timer.stage("verify"):
+                    fitness = surface_fitness(stage.R, stage.t, xyz, np.asarray(bundle.surface_points),
+                                              stage.bandwidth)
+            if fitness < voting.min_surface_fitness:
+                logger.info("pose rejected: surface fitness %.2f < %.2f", fitness, voting.min_surface_fitness)
+                return "fit_residual", (
+                    f"only {fitness:.0%} of the stereo points lie on the target surface at the fitted pose")
+        if voting.min_photo_consistency > -1.0 and len(bundle.surface_points):
+            with timer.stage("verify"):
+                photo = photometric_consistency(stage.R, stage.t, np.asarray(bundle.surface_points), left_r, right_r,
+                                                self.K, self.baseline_m)
+            if photo.score is not None and photo.score < voting.min_photo_consistency:
+                logger.info("pose rejected: photometric consistency %.2f < %.2f", photo.score,
+                            voting.min_photo_consistency)
+                return "fit_residual", f"the left and right images disagree at the fitted pose (patch ZNCC {photo.score:.2f})"
+            if photo.score is None:
+                logger.info("photometric check skipped: %d textured patches", photo.patches)
+        return None
 
     def _outline(self, reg: Any, xyz: np.ndarray, stereo: Any) -> Any:
         """The outline decision (:func:`spacepose.silhouette.decide_outline`) between the registered
@@ -592,24 +632,12 @@ class PoseEstimator:
                 return "weak_votes", None, stereo.window, (
                     f"the pose and its 180° flip about body {voting.flip_axis} fit the stereo points almost "
                     f"equally (surface fitness {flip.fitness:.3f} vs {flip.fitness_other:.3f})")
-        if stage.valid and voting.min_surface_fitness > 0.0 and len(bundle.surface_points):
-            if fitness is None:
-                with timer.stage("verify"):
-                    fitness = surface_fitness(stage.R, stage.t, xyz, np.asarray(bundle.surface_points),
-                                              stage.bandwidth)
-            if fitness < voting.min_surface_fitness:
-                logger.info("pose rejected: surface fitness %.2f < %.2f", fitness, voting.min_surface_fitness)
-                return "fit_residual", None, stereo.window, (
-                    f"only {fitness:.0%} of the stereo points lie on the target surface at the fitted pose")
-        if stage.valid and voting.min_photo_consistency > -1.0 and len(bundle.surface_points):
-            with timer.stage("verify"):
-                photo = photometric_consistency(stage.R, stage.t, np.asarray(bundle.surface_points), left_r, right_r,
-                                                self.K, self.baseline_m)
-            if photo.score is not None and photo.score < voting.min_photo_consistency:
-                logger.info("pose rejected: photometric consistency %.2f < %.2f", photo.score,
-                            voting.min_photo_consistency)
-                return "fit_residual", None, stereo.window, (
-                    f"the left and right images disagree at the fitted pose (patch ZNCC {photo.score:.2f})")
-            if photo.score is None:
-                logger.info("photometric check skipped: %d textured patches", photo.patches)
+        problem = self._verify(stage, xyz, left_r, right_r, timer, fitness) if stage.valid else None
+        if problem is not None and stage.fallback is not None:
+            # a tracked pose refined against the outline that the other checks refuse: the unrefined one
+            logger.info("outline-refined tracked pose rejected (%s); trying the registered one", problem[1])
+            stage = dataclasses.replace(stage, R=stage.fallback[0], t=stage.fallback[1], fallback=None)
+            problem = self._verify(stage, xyz, left_r, right_r, timer, None)
+        if problem is not None:
+            return problem[0], None, stereo.window, problem[1]
         return stage.status, stage, stereo.window, "" if stage.valid else f"pose stage: {stage.status}"

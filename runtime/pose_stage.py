@@ -81,6 +81,8 @@ class PoseStageResult:
         fit_rms: RMS residual of the fit (m, NaN if none); ``bandwidth``: the MeanShift bandwidth (m).
         factors: the confidence factors (``cluster``, ``keypoints``, ``fit``, ``points``); the estimator
             adds ``flip_margin`` when its flip stage ran (:mod:`spacepose.flip`), not a factor.
+        fallback: ``(R, t)`` to report instead when the estimator's checks refuse ``R, t`` (a tracked
+            pose refined against the outline falls back to the registered one), else ``None``.
     """
 
     R: np.ndarray
@@ -96,6 +98,7 @@ class PoseStageResult:
     fit_rms: float = float("nan")
     bandwidth: float = float("nan")
     factors: dict[str, float] = field(default_factory=dict)
+    fallback: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def depth_sigma(depth_m: float, focal_px: float, baseline_m: float, sigma_d_px: float) -> float:

@@ -30,7 +30,7 @@ import numpy as np
 from .errors import check_shape
 
 __all__ = ["RegistrationConfig", "SurfaceLookup", "SurfaceModel", "RegistrationResult", "start_rotations", "register",
-           "select_with_prior", "rotation_angle_deg", "exp_so3"]
+           "select_with_prior", "near_prior", "rotation_angle_deg", "exp_so3"]
 
 
 @dataclass(frozen=True)
@@ -371,14 +371,19 @@ def select_with_prior(result: RegistrationResult, R_prior: np.ndarray, t_prior: 
     """Of the best pose and its runner-up, the one a previous frame's pose ``(R_prior, t_prior)``
     supports: within ``config.track_max_deg`` and ``config.track_max_m`` of it. ``None`` when
     neither or both are (the prior does not decide)."""
-    near = []
-    for R, t in ((result.R, result.t), (result.runner_up_R, result.runner_up_t)):
-        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-            continue
-        if (float(rotation_angle_deg(R_prior, R)) <= config.track_max_deg
-                and float(np.linalg.norm(np.asarray(t) - np.asarray(t_prior))) <= config.track_max_m):
-            near.append((R, t))
+    near = [(R, t) for R, t in ((result.R, result.t), (result.runner_up_R, result.runner_up_t))
+            if near_prior(R, t, R_prior, t_prior, config)]
     return near[0] if len(near) == 1 else None
+
+
+def near_prior(R: np.ndarray, t: np.ndarray, R_prior: np.ndarray, t_prior: np.ndarray,
+               config: RegistrationConfig) -> bool:
+    """Whether the pose (R, t) is finite and within ``config.track_max_deg`` and ``config.track_max_m``
+    of the previous frame's pose ``(R_prior, t_prior)``."""
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+        return False
+    return (float(rotation_angle_deg(R_prior, R)) <= config.track_max_deg
+            and float(np.linalg.norm(np.asarray(t) - np.asarray(t_prior))) <= config.track_max_m)
 
 
 def _scene_cost(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, tau: float) -> np.ndarray:

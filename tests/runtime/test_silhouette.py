@@ -304,3 +304,36 @@ def test_the_estimator_refuses_a_pose_the_outline_and_the_points_disagree_on(tmp
     est2 = _estimator(tmp_path / "o", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0})
     res = est2.estimate(left, right)
     assert res.valid and rotation_angle_deg(res.R, chosen["R"]) < 1e-9 and res.outline_margin_px == 1.5
+
+
+def test_a_tracked_frame_reports_the_outline_refined_pose_and_falls_back_when_it_fails_the_checks(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.silhouette import OutlineDecision, OutlineFit
+
+    left, right = synthetic_pair()
+    first = _estimator(tmp_path / "l", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0}
+                       ).estimate(left, right)
+    assert first.valid
+    # the outline never decides (margin 5 px demanded), nor does the registration: only tracking can
+    est = _estimator(tmp_path / "t", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 5.0})
+    est._prior = first
+    est._roi_hint = lambda: None          # the coarse pass (the tiny bundle's prior window spans the frame)
+    nudged = Rotation.from_euler("x", 2.0, degrees=True).as_matrix() @ first.R
+    far = flipped_pose(first.R, first.t, est.bundle.centre, "z")
+
+    def refined(candidates, *args, **kwargs):
+        return OutlineDecision(best=OutlineFit(far[0], far[1], 0.8), other=OutlineFit(nudged, first.t, 0.9),
+                               best_index=0, margin_px=0.1, turned_deg=178.0)
+
+    monkeypatch.setattr(estimator_module, "decide_outline", refined)
+    res = est.estimate(left, right)
+    assert res.valid and res.tracked
+    assert rotation_angle_deg(res.R, nudged) < 1e-9           # the refined pose on the prior's side
+    # the checks refuse the refined pose: the registered candidate it came from is reported instead
+    original = est._verify
+    monkeypatch.setattr(est, "_verify", lambda stage, *a: ("fit_residual", "stub") if
+                        rotation_angle_deg(stage.R, nudged) < 1e-9 else original(stage, *a))
+    res = est.estimate(left, right)
+    assert res.valid and res.tracked and rotation_angle_deg(res.R, nudged) > 0.1
+    assert rotation_angle_deg(res.R, first.R) < 20.0
