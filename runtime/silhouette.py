@@ -133,9 +133,10 @@ def splat_mask(points: np.ndarray, R: np.ndarray, t: np.ndarray, frame: Silhouet
     """
     n = frame.size
     R32, t32 = np.asarray(R, dtype=points.dtype), np.asarray(t, dtype=points.dtype)
-    uv = _project(points @ R32.T + t32, frame.K.astype(points.dtype))
-    ij = np.rint(uv).astype(np.int32)
-    inside = (ij[:, 0] >= 0) & (ij[:, 0] < n) & (ij[:, 1] >= 0) & (ij[:, 1] < n)
+    X = points @ R32.T + t32
+    uv = _project(X, frame.K.astype(points.dtype))
+    ij = np.rint(np.clip(np.nan_to_num(uv, nan=-1.0), -1.0, float(n))).astype(np.int32)   # no int overflow
+    inside = (ij[:, 0] >= 0) & (ij[:, 0] < n) & (ij[:, 1] >= 0) & (ij[:, 1] < n) & (X[:, 2] > 1e-3)
     mask = np.zeros((n, n), np.uint8)
     mask[ij[inside, 1], ij[inside, 0]] = 1
     return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _KERNEL), ij, inside

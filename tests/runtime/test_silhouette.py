@@ -337,3 +337,15 @@ def test_a_tracked_frame_reports_the_outline_refined_pose_and_falls_back_when_it
     res = est.estimate(left, right)
     assert res.valid and res.tracked and rotation_angle_deg(res.R, nudged) > 0.1
     assert rotation_angle_deg(res.R, first.R) < 20.0
+
+
+def test_points_behind_the_camera_or_a_nan_pose_splat_nothing(plate):
+    pts, _ = plate
+    frame = silhouette_frame(K, 160, 80, 320, 192)
+    mask, _, inside = splat_mask(pts, np.eye(3), np.array([0.0, 0.0, -20.0]), frame)
+    assert not inside.any() and mask.sum() == 0
+    mask, _, inside = splat_mask(pts, np.full((3, 3), np.nan), np.zeros(3), frame)
+    assert not inside.any() and mask.sum() == 0
+    # a point a hair in front of the camera lands far outside, not wrapped back into the frame
+    mask, _, inside = splat_mask(np.array([[1.0, 1.0, 1e-5]]), np.eye(3), np.zeros(3), frame)
+    assert not inside.any()
