@@ -17,12 +17,15 @@ samples are those that land on the splat's boundary.
 
 *Refinement* (:func:`refine_outline`): Gauss-Newton on the 6-DoF pose, residuals of two kinds,
 each group weighted by the inverse of its count and its noise: every contour sample to the nearest
-observed contour pixel (2-D, pixels of the silhouette frame; pairs beyond ``trunc_px`` dropped),
-and every stereo point to the surface at the pose (point-to-plane over ``tau``, which keeps the
-depth that the outline alone fixes poorly).
+observed contour pixel and every observed contour pixel to the nearest contour sample (2-D, pixels
+of the silhouette frame; pairs beyond ``trunc_px`` dropped), and every stereo point to the surface
+at the pose (point-to-plane over ``tau``, which keeps the depth that the outline alone fixes poorly).
 
 *Decision* (:func:`decide_outline`): the symmetric chamfer distance of the refined outline to the
-observed one for both candidates. The lower wins; the gap is the margin. Both are measured in
+observed one for every candidate, and for the flip of the best one, refined in turn (a candidate
+too far off to converge can leave its flip the better fit; the flip of that precise wrong pose is
+a precise right one). The lowest wins; the margin is the gap to the best pose more than 90° from
+it. Both are measured in
 *outline pixels*: pixels of a ``max_side_px`` view of the stereo window, whatever its size. The
 window is a fixed multiple of the target's extent, so an outline pixel is a fixed fraction of the
 target: the parts the flip moves are as many outline pixels across at 10 m as at 50 m, at

@@ -13,6 +13,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bundle", type=Path, default=None, help="model bundle folder (default: the shipped one)")
     parser.add_argument("--out", type=Path, default=Path("runs/eval_pose"), help="report folder")
     parser.add_argument("--limit", type=int, default=None, help="only the first N test frames")
+    parser.add_argument("--skip", type=int, default=0, help="leave out the first N frames of the split (before --limit)")
     parser.add_argument("--split", default="test")
     parser.add_argument("--baseline", choices=("classical",), default=None, help="add a classical baseline column")
     parser.add_argument("--overlays", type=int, default=6, help="frames with a projected-box overlay image")
@@ -23,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from spacepose.tools.eval_pose import evaluate_pose, format_tables, write_report
 
-    report = evaluate_pose(args.dataset, args.bundle, limit=args.limit, baseline=args.baseline, threads=args.threads,
+    report = evaluate_pose(args.dataset, args.bundle, limit=args.limit, skip=args.skip, baseline=args.baseline, threads=args.threads,
                            split=args.split, overlays=args.overlays, out_dir=args.out, refine=args.refine,
                            progress=lambda i, n: print(f"\r{i}/{n}", end="", flush=True))
     print()

@@ -159,12 +159,13 @@ def save_scatter(rows: list[dict[str, Any]], path: str | Path, title: str = "") 
 
 
 def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limit: int | None = None,
-                  baseline: str | None = None, threads: int = 2, split: str = "test", overlays: int = 6,
+                  skip: int = 0, baseline: str | None = None, threads: int = 2, split: str = "test", overlays: int = 6,
                   out_dir: str | Path | None = None, seed: int = 0, refine: bool = False,
                   progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
     """Run the flight pipeline (and optionally a baseline) on ``split`` frames; returns the report.
 
-    ``refine`` turns on the estimator's point-to-plane ICP after the validity checks.
+    ``refine`` turns on the estimator's point-to-plane ICP after the validity checks. ``skip`` leaves out
+    the first frames of the split (then ``limit`` counts from there): frames a calibration used stay out.
 
     Report: ``{"frames": [...per-frame rows...], "ours": {overall, regime:*, distance:*, confidence},
     "baseline": {...} | None, "bundle", "dataset"}``; with ``out_dir`` the overlay images are written
@@ -178,6 +179,9 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
 
     root = Path(dataset)
     records = read_pose_labels(root, split)
+    if skip < 0:
+        raise ValueError(f"skip must be >= 0, got {skip}")
+    records = records[int(skip):]
     if limit is not None:
         records = records[: int(limit)]
     if not records:

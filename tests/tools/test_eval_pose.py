@@ -89,3 +89,12 @@ def test_full_pipeline_with_baseline(tmp_path_factory, tmp_path, monkeypatch, ca
     assert (out / "fig14_errors_vs_distance.png").is_file() and (out / "pose_eval.md").is_file()
     assert len(list((out / "overlays").iterdir())) == 1
     assert "baseline (classical)" in capsys.readouterr().out
+    # --skip leaves out the first frames of the split (frames a calibration used)
+    from spacepose.errors import DatasetError
+
+    last = evaluate_pose(root, bundle, skip=n_test - 1, overlays=0, threads=1)
+    assert [f["frame"] for f in last["frames"]] == [report["frames"][-1]["frame"]]
+    with pytest.raises(DatasetError, match="no frames"):
+        evaluate_pose(root, bundle, skip=n_test, overlays=0, threads=1)
+    with pytest.raises(ValueError, match="skip"):
+        evaluate_pose(root, bundle, skip=-1, overlays=0, threads=1)
