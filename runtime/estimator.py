@@ -423,7 +423,8 @@ class PoseEstimator:
            ``inlier_fraction * (1 - exp(-margin_px / min_margin_px))``. When the registration is
            conclusive (below) and picks the other one, the frame is ``weak_votes``.
         2. the registration's margin over its best distinct alternative (``min_margin``, with a
-           depth fine enough, ``max_tau_m``): confidence
+           depth fine enough, ``max_tau_m``), provided the outline's best fit, however undecided,
+           is on the same side (else ``weak_votes``): confidence
            ``inlier_fraction * (1 - exp(-margin / min_margin))``; the pose is the outline-refined
            one when that refinement fits the outline within ``max_chamfer_px``.
         3. the previous frame's valid pose, when exactly one of the two is near it
@@ -480,8 +481,13 @@ class PoseEstimator:
             R, t = outline.best.R, outline.best.t
             confidence = reg.inlier_fraction * (1.0 - math.exp(-outline.margin_px / max(sil.min_margin_px, 1e-9)))
         elif conclusive:
-            if (outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px
-                    and float(rotation_angle_deg(reg.R, outline.best.R)) <= 90.0):
+            if outline is not None and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:
+                # the stereo points decide, but the outline, undecided as it is, leans to the flip: on
+                # 9 frames so decided (session 8), both flips were of this kind and none of the 7 good poses
+                return _stage_invalid(stage, "weak_votes", factors), (
+                    f"the stereo points prefer the pose (score gap {margin:.4f}) but the outline leans to its flip "
+                    f"(chamfer {outline.best.chamfer_px:.2f} px, margin {outline.margin_px:.2f} px)")
+            if outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px:
                 R, t = outline.best.R, outline.best.t
             confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
         else:

@@ -349,3 +349,25 @@ def test_points_behind_the_camera_or_a_nan_pose_splat_nothing(plate):
     # a point a hair in front of the camera lands far outside, not wrapped back into the frame
     mask, _, inside = splat_mask(np.array([[1.0, 1.0, 1e-5]]), np.eye(3), np.zeros(3), frame)
     assert not inside.any()
+
+
+def test_a_registration_decision_the_outline_leans_against_is_not_reported(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.silhouette import OutlineDecision, OutlineFit
+
+    left, right = synthetic_pair()
+    # the registration decides (min_margin 0) and the outline does not (a 5 px margin demanded)
+    est = _estimator(tmp_path, {"min_margin": 0.0}, {"max_chamfer_px": 100.0, "min_margin_px": 5.0})
+    assert est.estimate(left, right).valid
+
+    def leaning(candidates, *args, **kwargs):   # undecided, but its best fit is the flip
+        R, t = candidates[0]
+        R_f, t_f = flipped_pose(R, t, est.bundle.centre, "z")
+        return OutlineDecision(best=OutlineFit(R_f, t_f, 0.9), other=OutlineFit(R, t, 1.0), best_index=1,
+                               margin_px=0.1, turned_deg=180.0)
+
+    monkeypatch.setattr(estimator_module, "decide_outline", leaning)
+    est.reset()
+    res = est.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes" and "leans to its flip" in res.detail
