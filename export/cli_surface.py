@@ -17,7 +17,7 @@ import json
 import logging
 from pathlib import Path
 
-HELP = "write a bundle's target surface samples + normals (and optionally its registration section)"
+HELP = "write a bundle's target surface samples + normals (optionally its registration and silhouette sections)"
 
 log = logging.getLogger(__name__)
 

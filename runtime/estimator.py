@@ -360,21 +360,20 @@ class PoseEstimator:
             R, t, conf, valid = stage.R, stage.t, stage.confidence, True
         else:
             R, t, conf, valid = np.full((3, 3), np.nan), np.full(3, np.nan), 0.0, False
-        nan = float("nan")
+        factors = {} if stage is None else stage.factors
+
+        def factor(name: str) -> float:
+            return float(factors.get(name, float("nan")))
+
         result = PoseResult(R=R, t=t, q_wxyz=rotation_to_quaternion(R), valid=valid, status=status,
                             confidence=float(conf), timings_ms=dict(timer.timings_ms),
                             network_ms=timer.network_ms,
                             n_points=0 if stage is None else int(stage.n_inliers),
                             roi=None if window is None else window.bbox, detail=detail,
-                            flip_margin=float("nan") if stage is None else float(
-                                stage.factors.get("flip_margin", float("nan"))),
-                            depth_tolerance_m=float("nan") if stage is None else float(
-                                stage.factors.get("depth_tolerance_m", float("nan"))),
-                            tracked=bool(valid and stage is not None and stage.factors.get("tracked", 0.0)),
-                            outline_chamfer_px=nan if stage is None else float(
-                                stage.factors.get("outline_chamfer_px", nan)),
-                            outline_margin_px=nan if stage is None else float(
-                                stage.factors.get("outline_margin_px", nan)))
+                            flip_margin=factor("flip_margin"), depth_tolerance_m=factor("depth_tolerance_m"),
+                            tracked=bool(valid and factors.get("tracked", 0.0)),
+                            outline_chamfer_px=factor("outline_chamfer_px"),
+                            outline_margin_px=factor("outline_margin_px"))
         if status != "bad_input":  # a bad frame says nothing about where the target is
             with self._lock:
                 self._prior = result

@@ -315,7 +315,7 @@ class OutlineDecision:
 def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_points: np.ndarray,
                    disparity: np.ndarray, K_full: np.ndarray, baseline_m: float, window: tuple[int, int, int],
                    config: SilhouetteConfig = SilhouetteConfig(), *, stereo_points: np.ndarray | None = None,
-                   surface: SurfaceModel | None = None, tau_m: float = 0.5, target_radius_m: float = 0.0,
+                   surface: SurfaceModel | None = None, tau_m: float = 0.5,
                    flip: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
                    ) -> OutlineDecision:
     """Refine candidate poses against the outline the ``disparity`` (H, W) shows in ``window``
@@ -332,7 +332,7 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
     check_shape(disparity, (None, None), "disparity")
     frame = silhouette_frame(K_full, *window, config.max_side_px)
     distance = float(np.mean([np.linalg.norm(t) for _, t in candidates]))
-    far = distance + max(target_radius_m, 0.0) + config.depth_margin_m
+    far = distance + config.depth_margin_m
     observed = observed_mask(np.asarray(disparity, dtype=np.float32), frame,
                              float(K_full[0, 0]) * float(baseline_m) / max(far, 1e-6))
 

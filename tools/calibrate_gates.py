@@ -42,6 +42,14 @@ def _finite(value: Any) -> float:
     return v if math.isfinite(v) else float("nan")
 
 
+def _outcomes(ok: list[dict[str, Any]], max_e_t: float, max_e_r: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """e_t, e_R of the valid rows ``ok``, and which are flips (e_R > FLIP_DEG) and wrong (over either bound)."""
+    e_t = np.array([_finite(r.get("e_t")) for r in ok])
+    e_r = np.array([_finite(r.get("e_R")) for r in ok])
+    return e_t, e_r, e_r > FLIP_DEG, (e_t > max_e_t) | (e_r > max_e_r)
+
+
 def gate_table(rows: Iterable[dict[str, Any]], confidences: Sequence[float], margins: Sequence[float],
                max_e_t: float, max_e_r: float, taus: Sequence[float] = (math.inf,)) -> list[dict[str, float]]:
     """One row per (min_confidence, min_flip_margin, max_tau_m): kept poses, flips, wrong poses among them.
@@ -52,10 +60,7 @@ def gate_table(rows: Iterable[dict[str, Any]], confidences: Sequence[float], mar
     tau = np.nan_to_num(np.array([_finite(r.get("depth_tolerance_m")) for r in ok]), nan=0.0)
     conf = np.array([_finite(r.get("confidence")) for r in ok])
     margin = np.nan_to_num(np.array([_finite(r.get("flip_margin")) for r in ok]), nan=np.inf)  # no flip stage
-    e_t = np.array([_finite(r.get("e_t")) for r in ok])
-    e_r = np.array([_finite(r.get("e_R")) for r in ok])
-    flip = e_r > FLIP_DEG
-    wrong = (e_t > max_e_t) | (e_r > max_e_r)
+    e_t, e_r, flip, wrong = _outcomes(ok, max_e_t, max_e_r)
     table = []
     for c, m, tmax in itertools.product(confidences, margins, taus):
         keep = (conf >= c) & (margin >= m) & (tau <= tmax)
@@ -73,10 +78,7 @@ def outline_gate_table(rows: Iterable[dict[str, Any]], chamfers: Sequence[float]
     ok = [r for r in rows if r.get("valid")]
     chamfer = np.nan_to_num(np.array([_finite(r.get("outline_chamfer_px")) for r in ok]), nan=np.inf)
     margin = np.nan_to_num(np.array([_finite(r.get("outline_margin_px")) for r in ok]), nan=-np.inf)
-    e_t = np.array([_finite(r.get("e_t")) for r in ok])
-    e_r = np.array([_finite(r.get("e_R")) for r in ok])
-    flip = e_r > FLIP_DEG
-    wrong = (e_t > max_e_t) | (e_r > max_e_r)
+    e_t, e_r, flip, wrong = _outcomes(ok, max_e_t, max_e_r)
     table = []
     for c, m in itertools.product(chamfers, margins):
         keep = (chamfer <= c) & (margin >= m)
