@@ -524,8 +524,10 @@ def _parse_silhouette(section: Any, n_points: int, has_registration: bool) -> Si
         raise BundleError("bundle.json: silhouette needs target.silhouette_points (at least 100) and a registration "
                           "section (it decides between the registered pose and its flip)")
     values = _config_fields(SilhouetteConfig, section, "silhouette",
-                            zero_ints=("seed", "iterations", "stereo_points", "reverse"),
-                            zero_numbers=("depth_margin_m", "min_margin_px"))
+                            zero_ints=("seed", "iterations", "stereo_points", "reverse", "image_vote",
+                                       "image_exclusion_px", "image_min_pixels"),
+                            zero_numbers=("depth_margin_m", "min_margin_px", "range_weight", "image_min_score", "image_min_margin_px",
+                                          "image_max_background"))
     try:
         return SilhouetteConfig(**values)
     except ValueError as err:

@@ -95,6 +95,10 @@ class PoseResult:
             distance (outline px: pixels of a ``max_side_px`` view of the stereo window) of the best outline-refined pose to the outline the stereo
             disparity shows, and the gap to the best pose more than 90° from it
             (:mod:`spacepose.silhouette`); NaN when the stage did not run. Not part of the JSON line.
+        outline_image_score, outline_image_background, outline_image_pixels: the left image's vote for
+            that pose against its flip, the lit share of the sky ring around them, and how many pixels
+            their outlines differ in (:mod:`spacepose.image_vote`); NaN when the vote was not taken.
+            Not part of the JSON line.
     """
 
     R: np.ndarray
@@ -113,6 +117,9 @@ class PoseResult:
     tracked: bool = False
     outline_chamfer_px: float = float("nan")
     outline_margin_px: float = float("nan")
+    outline_image_score: float = float("nan")
+    outline_image_background: float = float("nan")
+    outline_image_pixels: float = float("nan")
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -373,7 +380,10 @@ class PoseEstimator:
                             flip_margin=factor("flip_margin"), depth_tolerance_m=factor("depth_tolerance_m"),
                             tracked=bool(valid and factors.get("tracked", 0.0)),
                             outline_chamfer_px=factor("outline_chamfer_px"),
-                            outline_margin_px=factor("outline_margin_px"))
+                            outline_margin_px=factor("outline_margin_px"),
+                            outline_image_score=factor("outline_image_score"),
+                            outline_image_background=factor("outline_image_background"),
+                            outline_image_pixels=factor("outline_image_pixels"))
         if status != "bad_input":  # a bad frame says nothing about where the target is
             with self._lock:
                 self._prior = result
@@ -406,8 +416,8 @@ class PoseEstimator:
         status, stage, window, detail = outcome
         return self._result(status, timer, stage=stage, window=window, detail=detail)
 
-    def _register(self, xyz: np.ndarray, stage: PoseStageResult, stereo: Any, timer: StageTimer
-                  ) -> tuple[PoseStageResult, str]:
+    def _register(self, xyz: np.ndarray, stage: PoseStageResult, stereo: Any, timer: StageTimer,
+                  left_r: np.ndarray | None = None) -> tuple[PoseStageResult, str]:
         """Multi-start registration (:mod:`spacepose.registration`) seeded with the network's pose
         (and the previous frame's valid pose, with ``use_prior``), each with its flip; then, with
         the bundle's ``silhouette`` stage, the outline (:mod:`spacepose.silhouette`).
@@ -418,7 +428,10 @@ class PoseEstimator:
 
         1. the outline: both refined against the outline the stereo disparity shows; the winner
            is valid when it fits well (``max_chamfer_px``) and clearly better than the best pose
-           more than 90° from it (``min_margin_px``). Confidence
+           more than 90° from it (``min_margin_px``); with the stage's ``image_vote``, the lit pixels of
+           ``left_r`` where the winner's outline and its flip's differ may also decide a frame with a
+           smaller margin, or leave one with a large margin undecided (:mod:`spacepose.image_vote`,
+           :class:`spacepose.silhouette.SilhouetteConfig`). Confidence
            ``inlier_fraction * (1 - exp(-margin_px / min_margin_px))``. When the registration is
            conclusive (below) and picks the other one, the frame is ``weak_votes``.
         2. the registration's margin over its best distinct alternative (``min_margin``, with a
@@ -470,8 +483,12 @@ class PoseEstimator:
         outline = None
         if self._outline_points is not None and stereo.window is not None:
             with timer.stage("silhouette"):
-                outline = self._outline(reg, xyz, stereo)
+                outline = self._outline(reg, xyz, stereo, left_r)
             factors.update(outline_chamfer_px=outline.best.chamfer_px, outline_margin_px=outline.margin_px)
+            if outline.vote is not None:
+                factors.update(outline_image_score=outline.vote.score,
+                               outline_image_background=outline.vote.background_lit,
+                               outline_image_pixels=float(outline.vote.pixels))
         sil = bundle.silhouette
         if outline is not None and outline.decided(sil):
             if conclusive and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:
@@ -501,8 +518,9 @@ class PoseEstimator:
                        f"the stereo depth (tolerance {reg.tau_m:.2f} m > {config.max_tau_m:.2f} m) is too coarse "
                        "to tell the pose from its flip")
                 if outline is not None:
+                    vote = "" if outline.vote is None else f", image vote {outline.vote.score:+.2f}"
                     why += (f"; the outline does not decide (chamfer {outline.best.chamfer_px:.2f} px, "
-                            f"margin {outline.margin_px:.2f} px)")
+                            f"margin {outline.margin_px:.2f} px{vote})")
                 return _stage_invalid(stage, "weak_votes", factors), (
                     why + ("" if prior is None else "; the previous pose does not pick one"))
             if len(refined) == 1:  # the refined pose near the previous one; the registered one if the checks refuse it
@@ -550,9 +568,10 @@ class PoseEstimator:
                 logger.info("photometric check skipped: %d textured patches", photo.patches)
         return None
 
-    def _outline(self, reg: Any, xyz: np.ndarray, stereo: Any) -> Any:
+    def _outline(self, reg: Any, xyz: np.ndarray, stereo: Any, left_r: np.ndarray | None = None) -> Any:
         """The outline decision (:func:`spacepose.silhouette.decide_outline`) between the registered
-        pose and its runner-up (when that is more than 90° away), plus the flip of the better one."""
+        pose and its runner-up (when that is more than 90° away), plus the flip of the better one;
+        ``left_r`` (the left rectified image) for the stage's image vote."""
         bundle = self.bundle
         axis, centre = bundle.voting.flip_axis, bundle.centre
         candidates = [(reg.R, reg.t)]
@@ -563,7 +582,7 @@ class PoseEstimator:
         w = stereo.window
         return decide_outline(candidates, self._outline_points, stereo.disparity, self.K, self.baseline_m,
                               (w.x0, w.y0, w.side), bundle.silhouette, stereo_points=xyz,
-                              surface=self._registration, tau_m=reg.tau_m, flip=flip)
+                              surface=self._registration, tau_m=reg.tau_m, flip=flip, image=left_r)
 
     def _valid_prior(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The previous frame's pose when it was valid and ``use_prior`` is on, else ``None``."""
@@ -611,7 +630,7 @@ class PoseEstimator:
                 sigma_d_px=voting.sigma_d_px / max(stereo.scale, 1e-9), offset_sign=bundle.pose.offset_sign,
                 seed=self.seed)
         if self._registration is not None:
-            stage, detail = self._register(xyz, stage, stereo, timer)  # times "registration", "silhouette"
+            stage, detail = self._register(xyz, stage, stereo, timer, left_r)  # times "registration", "silhouette"
             if not stage.valid:  # the invalid stage still carries its diagnostics (flip_margin)
                 return stage.status, stage, stereo.window, detail
         refine = None

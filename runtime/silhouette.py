@@ -20,6 +20,9 @@ each group weighted by the inverse of its count and its noise: every contour sam
 observed contour pixel and every observed contour pixel to the nearest contour sample (2-D, pixels
 of the silhouette frame; pairs beyond ``trunc_px`` dropped), and every stereo point to the surface
 at the pose (point-to-plane over ``tau``, which keeps the depth that the outline alone fixes poorly).
+With ``range_weight`` < 1 the contour residuals' pull along the line of sight is scaled down: the
+stereo outline is a little too large (the network carries the target's disparity into the sky), so
+the range it implies is biased near, and at 0 the range is the stereo points' alone.
 
 *Decision* (:func:`decide_outline`): the symmetric chamfer distance of the refined outline to the
 observed one for every candidate, and for the flip of the best one, refined in turn (a candidate
@@ -43,6 +46,7 @@ import cv2
 import numpy as np
 
 from .errors import check_shape
+from .image_vote import ImageVote, crop_to_frame, image_vote, window_grey
 from .registration import SurfaceModel, exp_so3, rotation_angle_deg
 
 __all__ = ["SilhouetteConfig", "SilhouetteFrame", "OutlineFit", "OutlineDecision", "silhouette_frame",
@@ -61,6 +65,19 @@ class SilhouetteConfig:
         residuals of each kind per step (fixed-seed subsamples). sigma_px: contour noise (frame px).
         reverse: 1 adds the observed-to-model contour pairs (each observed contour pixel to the
         nearest model contour sample) to the model-to-observed ones; 0 leaves them out.
+    range_weight: in [0, 1], how much the contour residuals may move the pose along the line of sight
+        (the target's range). A stereo network carries the target's disparity a little into a
+        textureless sky, so the observed outline is slightly too large and pulls the pose nearer (on
+        the train split by 0.1-0.2 m); with 0 the range comes from the stereo points alone and the
+        outline fixes the orientation and the direction. 1 (the default) is the plain Gauss-Newton.
+    image_vote: 1 lets the left image's lit pixels, where the winner's outline and its flip's differ,
+        take part (:mod:`spacepose.image_vote`): a usable vote (the sky ring at most
+        ``image_max_background`` lit, at least ``image_min_pixels`` differing pixels) scoring at least
+        ``image_min_score`` for the winner decides a frame whose margin is below ``min_margin_px`` but at
+        least ``image_min_margin_px``; one scoring ``-image_min_score`` or less (for the flip) leaves
+        even a frame with a large margin undecided. 0 (the default, and every bundle without these
+        keys) leaves the decision to the margin alone.
+    image_exclusion_px: band (frame px) around each outline left out of the vote.
     stop_rad, stop_m: a step smaller than both (rotation, translation) ends the refinement.
     depth_margin_m: the observed mask keeps pixels nearer than ``distance + depth_margin_m``.
     max_chamfer_px: the winner's chamfer distance (outline px, module docstring) above which its outline does not
@@ -78,6 +95,13 @@ class SilhouetteConfig:
     max_chamfer_px: float = 1.2
     min_margin_px: float = 0.2
     reverse: int = 1
+    range_weight: float = 1.0
+    image_vote: int = 0
+    image_min_score: float = 0.1
+    image_min_margin_px: float = 0.2
+    image_max_background: float = 0.02
+    image_exclusion_px: int = 2
+    image_min_pixels: int = 16
     stop_rad: float = 2e-4
     stop_m: float = 2e-3
     seed: int = 0
@@ -86,6 +110,10 @@ class SilhouetteConfig:
         if self.max_side_px < 16 or self.iterations < 0 or self.contour_points < 12 or self.stereo_points < 0:
             raise ValueError(f"invalid silhouette config {self}")
         if not (self.trunc_px > 0 and self.sigma_px > 0 and self.depth_margin_m >= 0):
+            raise ValueError(f"invalid silhouette config {self}")
+        if not 0.0 <= self.range_weight <= 1.0:
+            raise ValueError(f"invalid silhouette config {self}")
+        if self.image_vote not in (0, 1) or self.image_exclusion_px < 0 or self.image_min_pixels < 0 or not 0 <= self.image_max_background <= 1:
             raise ValueError(f"invalid silhouette config {self}")
 
 
@@ -149,14 +177,12 @@ def observed_mask(disparity: np.ndarray, frame: SilhouetteFrame, min_disparity: 
     """(n, n) uint8: full-frame ``disparity`` (H, W) > ``min_disparity`` over ``frame``'s box."""
     check_shape(disparity, (None, None), "disparity")
     h, w = disparity.shape
-    x0, y0, side = frame.x0, frame.y0, frame.side
-    crop = np.zeros((side, side), np.float32)
-    xa, ya, xb, yb = max(x0, 0), max(y0, 0), min(x0 + side, w), min(y0 + side, h)
-    if xb > xa and yb > ya:
-        crop[ya - y0:yb - y0, xa - x0:xb - x0] = disparity[ya:yb, xa:xb] > min_disparity
-    n = frame.size
-    if n != side:
-        crop = cv2.resize(crop, (n, n), interpolation=cv2.INTER_AREA)
+    x0, y0 = frame.x0, frame.y0
+    xa, ya, xb, yb = max(x0, 0), max(y0, 0), min(x0 + frame.side, w), min(y0 + frame.side, h)
+    if xb <= xa or yb <= ya:
+        return np.zeros((frame.size, frame.size), np.uint8)
+    near = (np.asarray(disparity[ya:yb, xa:xb]) > min_disparity).astype(np.float32)   # threshold the box only
+    crop = crop_to_frame(near, x0 - xa, y0 - ya, frame.side, frame.size)
     return (crop > 0.5).astype(np.uint8)
 
 
@@ -265,6 +291,9 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
             J[:, 1, 0], J[:, 1, 1], J[:, 1, 2] = -fy * (1.0 + y * y), fy * x * y, fy * x
             J[:, 1, 3], J[:, 1, 4], J[:, 1, 5] = 0.0, fy / z, -fy * y / z
             J = J.reshape(-1, 6)
+            if config.range_weight < 1.0:   # scale the contour's pull along the line of sight (config docstring)
+                ray = t / max(float(np.linalg.norm(t)), 1e-9)
+                J[:, 3:] = J[:, 3:] @ (np.eye(3) - (1.0 - config.range_weight) * np.outer(ray, ray))
             wc = 1.0 / (len(on) * config.sigma_px ** 2)
             H = wc * J.T @ J
             g = wc * J.T @ r.reshape(-1)
@@ -299,25 +328,51 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
 class OutlineDecision:
     """Candidates refined: ``best`` (lowest chamfer), ``other`` (the best more than 90° from it, NaN
     pose when none), ``margin_px`` between them; ``best_index``: which input candidate won
-    (``len(candidates)``: the flip of the best one); ``turned_deg``: angle between the two."""
+    (``len(candidates)``: the flip of the best one); ``turned_deg``: angle between the two;
+    ``vote``: the left image's vote for ``best`` against its exact flip (against ``other`` when no flip
+    was given; :mod:`spacepose.image_vote`), ``None`` when it was not taken (no image, the stage's
+    ``image_vote`` off, or neither a flip nor a rival)."""
 
     best: OutlineFit
     other: OutlineFit
     best_index: int
     margin_px: float
     turned_deg: float
+    vote: ImageVote | None = None
 
     def decided(self, config: SilhouetteConfig) -> bool:
-        """Whether the outline picks ``best`` (fine enough fit, clear enough gap)."""
-        return self.best.chamfer_px <= config.max_chamfer_px and self.margin_px >= config.min_margin_px
+        """Whether the outline picks ``best``: a fine enough fit and a clear enough gap, or (with
+        ``config.image_vote``) a smaller gap that the image's lit pixels back (class docstring of
+        :class:`SilhouetteConfig`)."""
+        if not self.best.chamfer_px <= config.max_chamfer_px:
+            return False
+        if self.image_vetoes(config):
+            return False
+        if self.margin_px >= config.min_margin_px:
+            return True
+        return self.decided_by_image(config)
+
+    def _usable_vote(self, config: SilhouetteConfig) -> ImageVote | None:
+        return self.vote if config.image_vote and self.vote is not None and self.vote.usable else None
+
+    def image_vetoes(self, config: SilhouetteConfig) -> bool:
+        """Whether a usable image vote goes against ``best`` by ``image_min_score`` or more."""
+        vote = self._usable_vote(config)
+        return vote is not None and vote.score <= -config.image_min_score
+
+    def decided_by_image(self, config: SilhouetteConfig) -> bool:
+        """Whether the image vote, with a margin of at least ``image_min_margin_px``, picks ``best``."""
+        vote = self._usable_vote(config)
+        return bool(vote is not None and self.margin_px >= config.image_min_margin_px
+                    and vote.score >= config.image_min_score)
 
 
 def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_points: np.ndarray,
                    disparity: np.ndarray, K_full: np.ndarray, baseline_m: float, window: tuple[int, int, int],
                    config: SilhouetteConfig = SilhouetteConfig(), *, stereo_points: np.ndarray | None = None,
                    surface: SurfaceModel | None = None, tau_m: float = 0.5,
-                   flip: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
-                   ) -> OutlineDecision:
+                   flip: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
+                   image: np.ndarray | None = None) -> OutlineDecision:
     """Refine candidate poses against the outline the ``disparity`` (H, W) shows in ``window``
     (full-frame ``x0, y0, side``) and say which fits it best (module docstring).
 
@@ -326,6 +381,10 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
     flip the better fit; the flip of that precise wrong pose is a precise right one, and the
     comparison is then between two converged poses. The margin is measured against the best pose
     more than 90° from the winner (``cap`` when there is none).
+
+    ``image``: the left rectified image (H, W[, C], the disparity's pixels). With ``config.image_vote``
+    its lit pixels vote between the winner's outline and that of the winner's exact ``flip`` (the
+    best rival's without ``flip``; :mod:`spacepose.image_vote`).
     """
     if not candidates:
         raise ValueError("decide_outline needs at least one candidate")
@@ -351,6 +410,18 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
     cap = config.trunc_px / _outline_unit(frame, config)
     other = fits[rivals[0]] if rivals else OutlineFit(R=np.full((3, 3), np.nan), t=np.full(3, np.nan), chamfer_px=cap)
     margin = other.chamfer_px - best.chamfer_px
+    vote = None
+    if config.image_vote and image is not None and (rivals or flip is not None):
+        # against the exact flip of the winner where there is one: its symmetric parts coincide with the
+        # winner's, so only the parts the flip moves vote (a separately refined rival that converged
+        # worse would lose the vote for its misfit, not for being the flip)
+        R_o, t_o = flip(best.R, best.t) if flip is not None else (other.R, other.t)
+        grey = window_grey(image, frame.x0, frame.y0, frame.side, frame.size)
+        vote = image_vote(grey, splat_mask(silhouette_points, best.R, best.t, frame)[0],
+                          splat_mask(silhouette_points, R_o, t_o, frame)[0],
+                          exclusion_px=config.image_exclusion_px, max_background=config.image_max_background,
+                          min_pixels=config.image_min_pixels)
     return OutlineDecision(best=best, other=other, best_index=min(order[0], len(candidates)),
                            margin_px=float(margin) if math.isfinite(margin) else 0.0,
-                           turned_deg=float(rotation_angle_deg(best.R, other.R)) if rivals else float("nan"))
+                           turned_deg=float(rotation_angle_deg(best.R, other.R)) if rivals else float("nan"),
+                           vote=vote)

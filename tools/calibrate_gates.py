@@ -16,6 +16,14 @@ pair. The thresholds come from train frames only; the test split measures them. 
 ``min_margin_px`` 0) and the registration's margin closed (``registration.min_margin`` 0.99), so that
 every frame the outline stage saw is valid in the report with its ``outline_chamfer_px`` and
 ``outline_margin_px``; the grid is then over those two gates.
+
+``--image``: the same evaluation with the silhouette stage's ``image_vote`` 1, so that every row also
+carries ``outline_image_score`` and ``outline_image_background``. The outline gates stay at
+``--chamfer`` / ``--margin`` (the bundle's), and the grid is over the image route's
+``image_min_margin_px``, ``image_min_score`` and ``image_min_pixels`` (``image_max_background`` fixed
+at ``--background``): a pose is kept when its chamfer passes, a usable vote does not go against it by
+``image_min_score``, and either its margin passes or the image route does. Run the evaluation with
+``image_min_pixels`` 0, so that every vote is in the rows.
 """
 
 from __future__ import annotations
@@ -31,7 +39,8 @@ import numpy as np
 
 from spacepose.tools.eval_pose import FLIP_DEG
 
-__all__ = ["gate_table", "outline_gate_table", "propose", "propose_outline", "main"]
+__all__ = ["gate_table", "outline_gate_table", "image_gate_table", "propose", "propose_outline", "propose_image",
+           "main"]
 
 
 def _finite(value: Any) -> float:
@@ -90,6 +99,47 @@ def outline_gate_table(rows: Iterable[dict[str, Any]], chamfers: Sequence[float]
     return table
 
 
+def image_gate_table(rows: Iterable[dict[str, Any]], max_chamfer_px: float, min_margin_px: float,
+                     image_margins: Sequence[float], scores: Sequence[float], max_background: float,
+                     max_e_t: float, max_e_r: float, pixels: Sequence[int] = (0,)) -> list[dict[str, float]]:
+    """One row per (image_min_margin_px, image_min_score, image_min_pixels) of the image route (module
+    docstring; :class:`spacepose.silhouette.SilhouetteConfig`): kept poses, how many of them the image
+    route alone keeps and how many margin decisions its veto refuses, flips and wrong poses among the
+    kept, and the mean errors of the kept poses that are not flips. A row without an image vote (NaN
+    score) passes only by its margin."""
+    ok = [r for r in rows if r.get("valid")]
+    chamfer = np.nan_to_num(np.array([_finite(r.get("outline_chamfer_px")) for r in ok]), nan=np.inf)
+    margin = np.nan_to_num(np.array([_finite(r.get("outline_margin_px")) for r in ok]), nan=-np.inf)
+    score = np.array([_finite(r.get("outline_image_score")) for r in ok])
+    background = np.nan_to_num(np.array([_finite(r.get("outline_image_background")) for r in ok]), nan=np.inf)
+    n_pixels = np.nan_to_num(np.array([_finite(r.get("outline_image_pixels")) for r in ok]), nan=0.0)
+    e_t, e_r, flip, wrong = _outcomes(ok, max_e_t, max_e_r)
+    fits = chamfer <= max_chamfer_px
+    table = []
+    for m, s, p in itertools.product(image_margins, scores, pixels):
+        usable = np.isfinite(score) & (background <= max_background) & (n_pixels >= max(p, 1))
+        veto = usable & (np.nan_to_num(score, nan=0.0) <= -s)
+        by_margin = fits & (margin >= min_margin_px) & ~veto
+        by_image = fits & usable & ~veto & (margin >= m) & (np.nan_to_num(score, nan=-np.inf) >= s) & ~by_margin
+        keep = by_margin | by_image
+        good = keep & ~flip
+        table.append({"image_min_margin_px": float(m), "image_min_score": float(s), "image_min_pixels": int(p),
+                      "kept": int(keep.sum()), "by_image": int(by_image.sum()),
+                      "vetoed": int((fits & (margin >= min_margin_px) & veto).sum()),
+                      "flips": int((keep & flip).sum()), "wrong": int((keep & wrong).sum()),
+                      "e_t_mean": float(np.mean(e_t[good])) if good.any() else float("nan"),
+                      "e_R_mean": float(np.mean(e_r[good])) if good.any() else float("nan")})
+    return table
+
+
+def propose_image(table: list[dict[str, float]]) -> dict[str, float] | None:
+    """The image-route gates keeping the most poses with no flip (stricter on ties); None if none keeps any."""
+    safe = [r for r in table if r["flips"] == 0 and r["kept"] > 0]
+    if not safe:
+        return None
+    return max(safe, key=lambda r: (r["kept"], r["image_min_margin_px"], r["image_min_score"], r["image_min_pixels"]))
+
+
 def propose_outline(table: list[dict[str, float]]) -> dict[str, float] | None:
     """The outline gates keeping the most poses with no flip (stricter on ties); None if none keeps any."""
     safe = [r for r in table if r["flips"] == 0 and r["kept"] > 0]
@@ -116,11 +166,19 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="also try these max depth tolerances (m; registration bundles: max_tau_m)")
     p.add_argument("--margins", type=float, nargs="*", default=None, help="min_flip_margin grid")
     p.add_argument("--outline", action="store_true", help="the silhouette gates instead (module docstring)")
+    p.add_argument("--image", action="store_true", help="the silhouette stage's image-vote gates (module docstring)")
+    p.add_argument("--chamfer", type=float, default=1.5, help="--image: the bundle's max_chamfer_px")
+    p.add_argument("--margin", type=float, default=0.5, help="--image: the bundle's min_margin_px")
+    p.add_argument("--background", type=float, default=0.02, help="--image: image_max_background")
+    p.add_argument("--scores", type=float, nargs="*", default=None, help="--image: image_min_score grid")
+    p.add_argument("--pixels", type=int, nargs="*", default=None, help="--image: image_min_pixels grid")
     args = p.parse_args(argv)
     report = json.loads(args.report.read_text())
     if report.get("split") == "test":
         raise SystemExit("calibrate on train frames, not the test split")
     rows = report["frames"]
+    if args.image:
+        return _main_image(args, report, rows)
     if args.outline:
         return _main_outline(args, report, rows)
     confidences = [0.0, 0.3, 0.5, 0.6, 0.7, 0.8, 0.9]
@@ -160,6 +218,34 @@ def _main_outline(args: argparse.Namespace, report: dict[str, Any], rows: list[d
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"report": str(args.report), "max_e_t": args.max_e_t, "max_e_r": args.max_e_r,
                                         "outline": True, "table": table, "proposed": best}, indent=2))
+    return 0
+
+
+def _main_image(args: argparse.Namespace, report: dict[str, Any], rows: list[dict[str, Any]]) -> int:
+    margins = args.margins or [0.0, 0.1, 0.2, 0.3, 0.4]
+    scores = args.scores or [0.0, 0.05, 0.1, 0.15, 0.2, 0.3]
+    table = image_gate_table(rows, args.chamfer, args.margin, margins, scores, args.background, args.max_e_t,
+                             args.max_e_r, args.pixels or [0, 8, 16, 32])
+    best = propose_image(table)
+    voted = sum(1 for r in rows if r.get("valid") and math.isfinite(_finite(r.get("outline_image_score"))))
+    print(f"{sum(1 for r in rows if r.get('valid'))} of {len(rows)} {report.get('split')} frames valid with the gates "
+          f"open, {voted} with an image vote; outline gates {args.chamfer} / {args.margin}, "
+          f"image_max_background {args.background}")
+    print("| image_min_margin_px | image_min_score | image_min_pixels | kept | by image | vetoed | flips | wrong "
+          "| e_t mean m | e_R mean ° |\n|---|---|---|---|---|---|---|---|---|---|")
+    for r in table:
+        print(f"| {r['image_min_margin_px']:.2f} | {r['image_min_score']:.2f} | {r['image_min_pixels']} | {r['kept']} "
+              f"| {r['by_image']} | {r['vetoed']} | {r['flips']} | {r['wrong']} | {r['e_t_mean']:.3f} "
+              f"| {r['e_R_mean']:.2f} |")
+    print("proposed:", "none (no setting keeps a pose without a flip)" if best is None else
+          f"image_min_margin_px {best['image_min_margin_px']}, image_min_score {best['image_min_score']}, "
+          f"image_min_pixels {best['image_min_pixels']} ({best['kept']} poses kept, {best['by_image']} by the image)")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"report": str(args.report), "max_e_t": args.max_e_t, "max_e_r": args.max_e_r,
+                                        "image": True, "max_chamfer_px": args.chamfer, "min_margin_px": args.margin,
+                                        "image_max_background": args.background, "table": table, "proposed": best},
+                                       indent=2))
     return 0
 
 

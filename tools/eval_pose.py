@@ -231,6 +231,9 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
                "flip_margin": float(result.flip_margin), "depth_tolerance_m": float(result.depth_tolerance_m),
                "outline_chamfer_px": float(result.outline_chamfer_px),
                "outline_margin_px": float(result.outline_margin_px),
+               "outline_image_score": float(result.outline_image_score),
+               "outline_image_background": float(result.outline_image_background),
+               "outline_image_pixels": float(result.outline_image_pixels),
                "R": np.asarray(result.R).tolist(), "t": np.asarray(result.t).tolist()}
         rows.append(row)
         if classical is not None:

@@ -132,6 +132,27 @@ def test_refinement_recovers_a_perturbed_pose(plate):
     assert fit.chamfer_px < 0.6 < start.chamfer_px
 
 
+def test_range_weight_keeps_a_fattened_outline_from_pulling_the_pose_near(plate):
+    """A stereo outline a little too large (disparity carried into the sky) makes the outline prefer a
+    nearer pose; with range_weight 0 the range is the stereo points' and stays at the truth."""
+    pts, nrm = plate
+    R, t = _pose()
+    disp = _disparity_of(pts, R, t)
+    fat = cv2.dilate((disp > 0).astype(np.uint8), np.ones((3, 3), np.uint8), iterations=1) > 0
+    disp = np.where(fat, disp.max(), 0.0).astype(np.float32)
+    frame = silhouette_frame(K, 160, 80, 320, 320)
+    obs = observed_mask(disp, frame, 10.0)
+    cam = pts @ R.T + t
+    stereo = cam[np.einsum("ij,ij->i", nrm @ R.T, cam) < 0][::10]
+    kwargs = dict(stereo_points=stereo, surface=SurfaceModel(pts, nrm), tau_m=0.2)
+    plain = refine_outline(R, t, pts, obs, frame, SilhouetteConfig(), **kwargs)
+    ranged = refine_outline(R, t, pts, obs, frame, SilhouetteConfig(range_weight=0.0), **kwargs)
+    assert t[2] - plain.t[2] > 0.2                              # pulled near by the fat outline
+    assert abs(ranged.t[2] - t[2]) < 0.05
+    with pytest.raises(ValueError):
+        SilhouetteConfig(range_weight=1.5)
+
+
 def test_the_outline_tells_the_pose_from_its_flip(plate):
     pts, nrm = plate
     R, t = _pose()

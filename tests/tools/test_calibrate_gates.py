@@ -70,3 +70,40 @@ def test_outline_table_and_proposal(tmp_path, capsys):
     assert main([str(report), "--outline", "--margins", "0.1", "0.3", "--out", str(tmp_path / "g.json")]) == 0
     assert json.loads((tmp_path / "g.json").read_text())["proposed"]["min_margin_px"] == 0.3
     assert "proposed: max_chamfer_px" in capsys.readouterr().out
+
+
+def _row(chamfer, margin, score, e_r, background=0.0, pixels=100):
+    return {"valid": True, "outline_chamfer_px": chamfer, "outline_margin_px": margin, "outline_image_score": score,
+            "outline_image_background": background, "outline_image_pixels": pixels, "e_t": 0.2, "e_R": e_r}
+
+
+IMAGE_ROWS = [
+    _row(0.7, 0.8, 0.05, 2.0),                     # kept by its margin
+    _row(1.1, 0.3, 0.3, 3.0),                      # the image backs it
+    _row(1.0, 0.25, 0.08, 178.0),                  # flip, weak vote
+    _row(1.0, 0.05, 0.5, 177.0),                   # flip, tiny margin
+    _row(1.0, 0.3, 0.4, 2.0, background=0.3),      # lit sky: no vote
+    _row(1.0, 0.3, None, 2.0, background=None),    # no vote taken
+    _row(2.5, 0.3, 0.9, 2.0),                      # the outline misfits
+    _row(0.8, 0.9, -0.4, 176.0),                   # flip with a large margin that the image refutes
+    _row(0.8, 0.3, 0.6, 175.0, pixels=5),          # flip backed by five pixels only
+]
+
+
+def test_image_table_and_proposal(tmp_path, capsys):
+    from spacepose.tools.calibrate_gates import image_gate_table, propose_image
+
+    table = image_gate_table(IMAGE_ROWS, 1.5, 0.5, [0.0, 0.2], [0.05, 0.1], 0.02, max_e_t=0.5, max_e_r=20.0,
+                             pixels=[0, 16])
+    loose = next(r for r in table if (r["image_min_margin_px"], r["image_min_score"], r["image_min_pixels"]) == (0.0, 0.05, 0))
+    assert (loose["kept"], loose["by_image"], loose["vetoed"], loose["flips"]) == (5, 4, 1, 3)
+    best = propose_image(table)
+    assert (best["image_min_margin_px"], best["image_min_score"], best["image_min_pixels"]) == (0.2, 0.1, 16)
+    assert (best["kept"], best["by_image"], best["vetoed"], best["flips"]) == (2, 1, 1, 0)
+    assert best["e_R_mean"] == pytest.approx(2.5)
+    report = tmp_path / "r.json"
+    report.write_text(json.dumps({"split": "train", "frames": IMAGE_ROWS}))
+    assert main([str(report), "--image", "--margins", "0.0", "0.2", "--scores", "0.05", "0.1", "--pixels", "0", "16",
+                 "--out", str(tmp_path / "g.json")]) == 0
+    assert json.loads((tmp_path / "g.json").read_text())["proposed"]["image_min_pixels"] == 16
+    assert "proposed: image_min_margin_px 0.2" in capsys.readouterr().out
