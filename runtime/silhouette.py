@@ -74,9 +74,11 @@ class SilhouetteConfig:
         take part (:mod:`spacepose.image_vote`): a usable vote (the sky ring at most
         ``image_max_background`` lit, at least ``image_min_pixels`` differing pixels) scoring at least
         ``image_min_score`` for the winner decides a frame whose margin is below ``min_margin_px`` but at
-        least ``image_min_margin_px``; one scoring ``-image_min_score`` or less (for the flip) leaves
-        even a frame with a large margin undecided. 0 (the default, and every bundle without these
-        keys) leaves the decision to the margin alone.
+        least ``image_min_margin_px``; one scoring ``image_veto_score`` or less leaves even a frame with
+        a large margin undecided (negative: the image must back the flip; 0: it must lean to the
+        winner whenever it can vote, since a vote of 0 means the differing pixels are all dark, and
+        in shadow the stereo outline that gave the margin is guessed too). 0 (the default, and every
+        bundle without these keys) leaves the decision to the margin alone.
     image_exclusion_px: band (frame px) around each outline left out of the vote.
     stop_rad, stop_m: a step smaller than both (rotation, translation) ends the refinement.
     depth_margin_m: the observed mask keeps pixels nearer than ``distance + depth_margin_m``.
@@ -102,6 +104,7 @@ class SilhouetteConfig:
     image_max_background: float = 0.02
     image_exclusion_px: int = 2
     image_min_pixels: int = 16
+    image_veto_score: float = -0.1
     stop_rad: float = 2e-4
     stop_m: float = 2e-3
     seed: int = 0
@@ -115,6 +118,8 @@ class SilhouetteConfig:
             raise ValueError(f"invalid silhouette config {self}")
         if self.image_vote not in (0, 1) or self.image_exclusion_px < 0 or self.image_min_pixels < 0 or not 0 <= self.image_max_background <= 1:
             raise ValueError(f"invalid silhouette config {self}")
+        if not -1.0 <= self.image_veto_score < self.image_min_score:
+            raise ValueError(f"invalid silhouette config {self}: image_veto_score must be in [-1, image_min_score)")
 
 
 @dataclass(frozen=True)
@@ -356,9 +361,9 @@ class OutlineDecision:
         return self.vote if config.image_vote and self.vote is not None and self.vote.usable else None
 
     def image_vetoes(self, config: SilhouetteConfig) -> bool:
-        """Whether a usable image vote goes against ``best`` by ``image_min_score`` or more."""
+        """Whether a usable image vote scores ``image_veto_score`` or less for ``best``."""
         vote = self._usable_vote(config)
-        return vote is not None and vote.score <= -config.image_min_score
+        return vote is not None and vote.score <= config.image_veto_score
 
     def decided_by_image(self, config: SilhouetteConfig) -> bool:
         """Whether the image vote, with a margin of at least ``image_min_margin_px``, picks ``best``."""

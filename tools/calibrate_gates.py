@@ -20,10 +20,11 @@ every frame the outline stage saw is valid in the report with its ``outline_cham
 ``--image``: the same evaluation with the silhouette stage's ``image_vote`` 1, so that every row also
 carries ``outline_image_score`` and ``outline_image_background``. The outline gates stay at
 ``--chamfer`` / ``--margin`` (the bundle's), and the grid is over the image route's
-``image_min_margin_px``, ``image_min_score`` and ``image_min_pixels`` (``image_max_background`` fixed
-at ``--background``): a pose is kept when its chamfer passes, a usable vote does not go against it by
-``image_min_score``, and either its margin passes or the image route does. Run the evaluation with
-``image_min_pixels`` 0, so that every vote is in the rows.
+``image_min_margin_px``, ``image_min_score``, ``image_min_pixels`` and ``image_veto_score``
+(``image_max_background`` fixed at ``--background``): a pose is kept when its chamfer passes, a usable
+vote does not score ``image_veto_score`` or less, and either its margin passes or the image route
+does. Run the evaluation with ``image_min_pixels`` 0 and ``image_veto_score`` -1, so that every vote is
+in the rows (a report made with a higher veto score tables only veto scores at or above it).
 """
 
 from __future__ import annotations
@@ -101,12 +102,14 @@ def outline_gate_table(rows: Iterable[dict[str, Any]], chamfers: Sequence[float]
 
 def image_gate_table(rows: Iterable[dict[str, Any]], max_chamfer_px: float, min_margin_px: float,
                      image_margins: Sequence[float], scores: Sequence[float], max_background: float,
-                     max_e_t: float, max_e_r: float, pixels: Sequence[int] = (0,)) -> list[dict[str, float]]:
-    """One row per (image_min_margin_px, image_min_score, image_min_pixels) of the image route (module
-    docstring; :class:`spacepose.silhouette.SilhouetteConfig`): kept poses, how many of them the image
-    route alone keeps and how many margin decisions its veto refuses, flips and wrong poses among the
-    kept, and the mean errors of the kept poses that are not flips. A row without an image vote (NaN
-    score) passes only by its margin."""
+                     max_e_t: float, max_e_r: float, pixels: Sequence[int] = (0,),
+                     vetoes: Sequence[float] = (-0.1,)) -> list[dict[str, float]]:
+    """One row per (image_min_margin_px, image_min_score, image_min_pixels, image_veto_score) of the
+    image route (module docstring; :class:`spacepose.silhouette.SilhouetteConfig`; a veto score not
+    below the min score is skipped): kept poses, how many of them the image route alone keeps and how
+    many margin decisions its veto refuses, flips and wrong poses among the kept, and the mean errors
+    of the kept poses that are not flips. A row without an image vote (NaN score) passes only by its
+    margin."""
     ok = [r for r in rows if r.get("valid")]
     chamfer = np.nan_to_num(np.array([_finite(r.get("outline_chamfer_px")) for r in ok]), nan=np.inf)
     margin = np.nan_to_num(np.array([_finite(r.get("outline_margin_px")) for r in ok]), nan=-np.inf)
@@ -116,14 +119,17 @@ def image_gate_table(rows: Iterable[dict[str, Any]], max_chamfer_px: float, min_
     e_t, e_r, flip, wrong = _outcomes(ok, max_e_t, max_e_r)
     fits = chamfer <= max_chamfer_px
     table = []
-    for m, s, p in itertools.product(image_margins, scores, pixels):
+    for m, s, p, v in itertools.product(image_margins, scores, pixels, vetoes):
+        if v >= s:
+            continue
         usable = np.isfinite(score) & (background <= max_background) & (n_pixels >= max(p, 1))
-        veto = usable & (np.nan_to_num(score, nan=0.0) <= -s)
+        veto = usable & (np.nan_to_num(score, nan=0.0) <= v)
         by_margin = fits & (margin >= min_margin_px) & ~veto
         by_image = fits & usable & ~veto & (margin >= m) & (np.nan_to_num(score, nan=-np.inf) >= s) & ~by_margin
         keep = by_margin | by_image
         good = keep & ~flip
         table.append({"image_min_margin_px": float(m), "image_min_score": float(s), "image_min_pixels": int(p),
+                      "image_veto_score": float(v),
                       "kept": int(keep.sum()), "by_image": int(by_image.sum()),
                       "vetoed": int((fits & (margin >= min_margin_px) & veto).sum()),
                       "flips": int((keep & flip).sum()), "wrong": int((keep & wrong).sum()),
@@ -137,7 +143,8 @@ def propose_image(table: list[dict[str, float]]) -> dict[str, float] | None:
     safe = [r for r in table if r["flips"] == 0 and r["kept"] > 0]
     if not safe:
         return None
-    return max(safe, key=lambda r: (r["kept"], r["image_min_margin_px"], r["image_min_score"], r["image_min_pixels"]))
+    return max(safe, key=lambda r: (r["kept"], r["image_min_margin_px"], r["image_min_score"], r["image_min_pixels"],
+                                    r["image_veto_score"]))
 
 
 def propose_outline(table: list[dict[str, float]]) -> dict[str, float] | None:
@@ -172,6 +179,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--background", type=float, default=0.02, help="--image: image_max_background")
     p.add_argument("--scores", type=float, nargs="*", default=None, help="--image: image_min_score grid")
     p.add_argument("--pixels", type=int, nargs="*", default=None, help="--image: image_min_pixels grid")
+    p.add_argument("--vetoes", type=float, nargs="*", default=None, help="--image: image_veto_score grid")
     args = p.parse_args(argv)
     report = json.loads(args.report.read_text())
     if report.get("split") == "test":
@@ -225,21 +233,23 @@ def _main_image(args: argparse.Namespace, report: dict[str, Any], rows: list[dic
     margins = args.margins or [0.0, 0.1, 0.2, 0.3, 0.4]
     scores = args.scores or [0.0, 0.05, 0.1, 0.15, 0.2, 0.3]
     table = image_gate_table(rows, args.chamfer, args.margin, margins, scores, args.background, args.max_e_t,
-                             args.max_e_r, args.pixels or [0, 8, 16, 32])
+                             args.max_e_r, args.pixels or [0, 8, 16, 32], args.vetoes or [-0.1])
     best = propose_image(table)
     voted = sum(1 for r in rows if r.get("valid") and math.isfinite(_finite(r.get("outline_image_score"))))
     print(f"{sum(1 for r in rows if r.get('valid'))} of {len(rows)} {report.get('split')} frames valid with the gates "
           f"open, {voted} with an image vote; outline gates {args.chamfer} / {args.margin}, "
           f"image_max_background {args.background}")
-    print("| image_min_margin_px | image_min_score | image_min_pixels | kept | by image | vetoed | flips | wrong "
-          "| e_t mean m | e_R mean ° |\n|---|---|---|---|---|---|---|---|---|---|")
+    print("| image_min_margin_px | image_min_score | image_min_pixels | image_veto_score | kept | by image | vetoed "
+          "| flips | wrong | e_t mean m | e_R mean ° |\n|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table:
-        print(f"| {r['image_min_margin_px']:.2f} | {r['image_min_score']:.2f} | {r['image_min_pixels']} | {r['kept']} "
+        print(f"| {r['image_min_margin_px']:.2f} | {r['image_min_score']:.2f} | {r['image_min_pixels']} "
+              f"| {r['image_veto_score']:.2f} | {r['kept']} "
               f"| {r['by_image']} | {r['vetoed']} | {r['flips']} | {r['wrong']} | {r['e_t_mean']:.3f} "
               f"| {r['e_R_mean']:.2f} |")
     print("proposed:", "none (no setting keeps a pose without a flip)" if best is None else
           f"image_min_margin_px {best['image_min_margin_px']}, image_min_score {best['image_min_score']}, "
-          f"image_min_pixels {best['image_min_pixels']} ({best['kept']} poses kept, {best['by_image']} by the image)")
+          f"image_min_pixels {best['image_min_pixels']}, image_veto_score {best['image_veto_score']} "
+          f"({best['kept']} poses kept, {best['by_image']} by the image)")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"report": str(args.report), "max_e_t": args.max_e_t, "max_e_r": args.max_e_r,

@@ -135,6 +135,7 @@ def _decision(margin, vote, chamfer=1.0):
     (0.9, ImageVote(-0.3, 400, 0.0, 0.1, True), 0, 1.0, True),       # ... unless the image route is off
     (0.9, ImageVote(-0.3, 4, 0.0, 0.1, False), 1, 1.0, True),        # ... or the vote is not usable
     (0.9, ImageVote(-0.05, 400, 0.0, 0.1, True), 1, 1.0, True),      # a weak vote against does not veto
+    (0.9, ImageVote(-0.1, 400, 0.0, 0.1, True), 1, 1.0, False),      # the veto includes its bound
 ])
 def test_the_decision_takes_the_image_route_only_when_asked_and_backed(margin, vote, image_on, chamfer, decided):
     config = SilhouetteConfig(max_chamfer_px=1.5, min_margin_px=0.5, image_vote=image_on, image_min_score=0.1,
@@ -142,9 +143,21 @@ def test_the_decision_takes_the_image_route_only_when_asked_and_backed(margin, v
     assert _decision(margin, vote, chamfer).decided(config) is decided
 
 
+@pytest.mark.parametrize("score, usable, decided", [
+    (0.0, True, False),      # all the differing pixels dark: the margin is not trusted
+    (-0.05, True, False),    # a weak lean to the flip
+    (0.02, True, True),      # a weak lean to the winner
+    (0.0, False, True),      # no usable vote: the margin alone
+])
+def test_a_veto_score_of_zero_asks_the_image_to_lean_to_the_winner(score, usable, decided):
+    config = SilhouetteConfig(max_chamfer_px=1.5, min_margin_px=0.5, image_vote=1, image_veto_score=0.0)
+    assert _decision(0.9, ImageVote(score, 400, 0.0, 0.1, usable), 1.0).decided(config) is decided
+
+
 def test_config_refuses_bad_image_settings():
     for bad in ({"image_vote": 2}, {"image_exclusion_px": -1}, {"image_max_background": 1.5},
-                {"image_min_pixels": -1}):
+                {"image_min_pixels": -1}, {"image_veto_score": 0.1}, {"image_veto_score": -1.5},
+                {"image_min_score": 0.05, "image_veto_score": 0.05}):
         with pytest.raises(ValueError):
             SilhouetteConfig(**bad)
 

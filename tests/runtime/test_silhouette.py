@@ -218,6 +218,9 @@ def test_bundle_silhouette_section(tmp_path):
     bundle = load_bundle(make_bundle(tmp_path / "b", _outline_manifest(max_chamfer_px=1.5, min_margin_px=0.3)))
     assert bundle.silhouette == SilhouetteConfig(max_chamfer_px=1.5, min_margin_px=0.3)
     assert bundle.silhouette_points.shape == (200, 3)
+    voting = load_bundle(make_bundle(tmp_path / "v", _outline_manifest(image_vote=1, range_weight=0, image_veto_score=0,
+                                                                     image_min_pixels=16)))
+    assert voting.silhouette == SilhouetteConfig(image_vote=1, range_weight=0.0, image_veto_score=0.0, image_min_pixels=16)
     plain = load_bundle(make_bundle(tmp_path / "plain"))
     assert plain.silhouette is None and plain.silhouette_points.shape == (0, 3)
 
@@ -226,6 +229,8 @@ def test_bundle_silhouette_section(tmp_path):
     (lambda d: d["silhouette"].update(bogus=1), "unknown keys"),
     (lambda d: d["silhouette"].update(max_chamfer_px=-1), "max_chamfer_px"),
     (lambda d: d["silhouette"].update(iterations=1.5), "iterations"),
+    (lambda d: d["silhouette"].update(image_veto_score=0.5), "image_veto_score"),
+    (lambda d: d["silhouette"].update(range_weight=2), "invalid silhouette config"),
     (lambda d: d["target"].update(silhouette_points=[[0, 0, 0]] * 10), "at least 100"),
     (lambda d: d.pop("registration"), "registration"),
     (lambda d: d.update(silhouette=[1, 2]), "must be an object"),

@@ -107,3 +107,10 @@ def test_image_table_and_proposal(tmp_path, capsys):
                  "--out", str(tmp_path / "g.json")]) == 0
     assert json.loads((tmp_path / "g.json").read_text())["proposed"]["image_min_pixels"] == 16
     assert "proposed: image_min_margin_px 0.2" in capsys.readouterr().out
+    # a veto score of 0 also refuses the margin decision whose image is dark (score 0)
+    dark = IMAGE_ROWS + [_row(0.8, 0.9, 0.0, 150.0)]
+    by_veto = {r["image_veto_score"]: r for r in image_gate_table(dark, 1.5, 0.5, [0.2], [0.1], 0.02, max_e_t=0.5,
+                                                                  max_e_r=20.0, pixels=[16], vetoes=[-0.1, 0.0, 0.1])}
+    assert sorted(by_veto) == [-0.1, 0.0]    # a veto score not below the min score is skipped
+    assert (by_veto[-0.1]["flips"], by_veto[-0.1]["vetoed"]) == (1, 1)
+    assert (by_veto[0.0]["flips"], by_veto[0.0]["vetoed"], by_veto[0.0]["kept"]) == (0, 2, 2)
