@@ -436,7 +436,7 @@ class PoseEstimator:
            conclusive (below) and picks the other one, the frame is ``weak_votes``.
         2. the registration's margin over its best distinct alternative (``min_margin``, with a
            depth fine enough, ``max_tau_m``), provided the outline's best fit, however undecided,
-           is on the same side (else ``weak_votes``): confidence
+           is on the same side and the image vote does not veto it (else ``weak_votes``): confidence
            ``inlier_fraction * (1 - exp(-margin / min_margin))``; the pose is the outline-refined
            one when that refinement fits the outline within ``max_chamfer_px``.
         3. the previous frame's valid pose, when exactly one of the two is near it
@@ -503,6 +503,10 @@ class PoseEstimator:
                 return _stage_invalid(stage, "weak_votes", factors), (
                     f"the stereo points prefer the pose (score gap {margin:.4f}) but the outline leans to its flip "
                     f"(chamfer {outline.best.chamfer_px:.2f} px, margin {outline.margin_px:.2f} px)")
+            if outline is not None and outline.image_vetoes(sil):
+                return _stage_invalid(stage, "weak_votes", factors), (
+                    f"the stereo points prefer the pose (score gap {margin:.4f}) but the image does not back it "
+                    f"(image vote {outline.vote.score:+.2f})")
             if outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px:
                 R, t = outline.best.R, outline.best.t
             confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))

@@ -397,3 +397,30 @@ def test_a_registration_decision_the_outline_leans_against_is_not_reported(tmp_p
     est.reset()
     res = est.estimate(left, right)
     assert not res.valid and res.status == "weak_votes" and "leans to its flip" in res.detail
+
+
+def test_a_registration_decision_the_image_vetoes_is_not_reported(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.image_vote import ImageVote
+    from spacepose.silhouette import OutlineDecision, OutlineFit
+
+    left, right = synthetic_pair()
+    # the registration decides (min_margin 0), the outline does not (a 5 px margin demanded) but agrees
+    est = _estimator(tmp_path, {"min_margin": 0.0},
+                     {"max_chamfer_px": 100.0, "min_margin_px": 5.0, "image_vote": 1, "image_veto_score": 0.0})
+
+    def agreeing(score):
+        def decide(candidates, *args, **kwargs):
+            R, t = candidates[0]
+            R_f, t_f = flipped_pose(R, t, est.bundle.centre, "z")
+            return OutlineDecision(best=OutlineFit(R, t, 0.9), other=OutlineFit(R_f, t_f, 1.0), best_index=0,
+                                   margin_px=0.1, turned_deg=180.0, vote=ImageVote(score, 200, 0.0, 0.1, True))
+        return decide
+
+    monkeypatch.setattr(estimator_module, "decide_outline", agreeing(0.05))
+    assert est.estimate(left, right).valid
+    monkeypatch.setattr(estimator_module, "decide_outline", agreeing(0.0))   # the image does not back it
+    est.reset()
+    res = est.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes" and "image does not back it" in res.detail
