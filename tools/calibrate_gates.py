@@ -165,7 +165,8 @@ def propose(table: list[dict[str, float]]) -> dict[str, float] | None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m spacepose.tools.calibrate_gates", description=__doc__.split("\n")[0])
-    p.add_argument("report", type=Path, help="pose_eval.json of eval-pose on train frames with both gates open")
+    p.add_argument("report", type=Path, nargs="+",
+                   help="pose_eval.json of eval-pose on train frames with both gates open (several: their frames pooled)")
     p.add_argument("--max-e-t", type=float, default=0.5, help="a pose farther off than this (m) is wrong")
     p.add_argument("--max-e-r", type=float, default=20.0, help="a pose turned more than this (deg) is wrong")
     p.add_argument("--out", type=Path, default=None, help="also write the table and proposal as JSON")
@@ -181,10 +182,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--pixels", type=int, nargs="*", default=None, help="--image: image_min_pixels grid")
     p.add_argument("--vetoes", type=float, nargs="*", default=None, help="--image: image_veto_score grid")
     args = p.parse_args(argv)
-    report = json.loads(args.report.read_text())
-    if report.get("split") == "test":
+    reports = [json.loads(path.read_text()) for path in args.report]
+    if any(r.get("split") == "test" for r in reports):
         raise SystemExit("calibrate on train frames, not the test split")
-    rows = report["frames"]
+    report = {"split": "+".join(sorted({str(r.get("split")) for r in reports}))}
+    rows = [row for r in reports for row in r["frames"]]
     if args.image:
         return _main_image(args, report, rows)
     if args.outline:
@@ -205,7 +207,8 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"max_tau_m {best['max_tau_m']:g} ({best['kept']} poses kept)")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"report": str(args.report), "max_e_t": args.max_e_t, "max_e_r": args.max_e_r,
+        args.out.write_text(json.dumps({"report": [str(path) for path in args.report], "max_e_t": args.max_e_t,
+                                        "max_e_r": args.max_e_r,
                                         "table": table, "proposed": best}, indent=2))
     return 0
 
@@ -224,7 +227,8 @@ def _main_outline(args: argparse.Namespace, report: dict[str, Any], rows: list[d
           f"max_chamfer_px {best['max_chamfer_px']}, min_margin_px {best['min_margin_px']} ({best['kept']} poses kept)")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"report": str(args.report), "max_e_t": args.max_e_t, "max_e_r": args.max_e_r,
+        args.out.write_text(json.dumps({"report": [str(path) for path in args.report], "max_e_t": args.max_e_t,
+                                        "max_e_r": args.max_e_r,
                                         "outline": True, "table": table, "proposed": best}, indent=2))
     return 0
 
@@ -252,7 +256,8 @@ def _main_image(args: argparse.Namespace, report: dict[str, Any], rows: list[dic
           f"({best['kept']} poses kept, {best['by_image']} by the image)")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"report": str(args.report), "max_e_t": args.max_e_t, "max_e_r": args.max_e_r,
+        args.out.write_text(json.dumps({"report": [str(path) for path in args.report], "max_e_t": args.max_e_t,
+                                        "max_e_r": args.max_e_r,
                                         "image": True, "max_chamfer_px": args.chamfer, "min_margin_px": args.margin,
                                         "image_max_background": args.background, "table": table, "proposed": best},
                                        indent=2))

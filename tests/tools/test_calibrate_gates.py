@@ -112,5 +112,13 @@ def test_image_table_and_proposal(tmp_path, capsys):
     by_veto = {r["image_veto_score"]: r for r in image_gate_table(dark, 1.5, 0.5, [0.2], [0.1], 0.02, max_e_t=0.5,
                                                                   max_e_r=20.0, pixels=[16], vetoes=[-0.1, 0.0, 0.1])}
     assert sorted(by_veto) == [-0.1, 0.0]    # a veto score not below the min score is skipped
+    # two reports pool their frames: the dark flip, on its own in the second, is kept at -0.1 and refused at 0
+    extra = tmp_path / "extra.json"
+    extra.write_text(json.dumps({"split": "train", "frames": [_row(0.8, 0.9, 0.0, 150.0)]}))
+    assert main([str(report), str(extra), "--image", "--margins", "0.2", "--scores", "0.1", "--pixels", "16",
+                 "--vetoes", "-0.1", "0", "--out", str(tmp_path / "pooled.json")]) == 0
+    pooled = json.loads((tmp_path / "pooled.json").read_text())
+    assert pooled["report"] == [str(report), str(extra)] and pooled["proposed"]["image_veto_score"] == 0.0
+    assert "10 of 10 train frames valid" in capsys.readouterr().out
     assert (by_veto[-0.1]["flips"], by_veto[-0.1]["vetoed"]) == (1, 1)
     assert (by_veto[0.0]["flips"], by_veto[0.0]["vetoed"], by_veto[0.0]["kept"]) == (0, 2, 2)
