@@ -116,7 +116,8 @@ class SilhouetteConfig:
             raise ValueError(f"invalid silhouette config {self}")
         if not 0.0 <= self.range_weight <= 1.0:
             raise ValueError(f"invalid silhouette config {self}")
-        if self.image_vote not in (0, 1) or self.image_exclusion_px < 0 or self.image_min_pixels < 0 or not 0 <= self.image_max_background <= 1:
+        if (self.image_vote not in (0, 1) or self.image_exclusion_px < 0 or self.image_min_pixels < 0
+                or not 0 <= self.image_max_background <= 1):
             raise ValueError(f"invalid silhouette config {self}")
         if not -1.0 <= self.image_veto_score < self.image_min_score:
             raise ValueError(f"invalid silhouette config {self}: image_veto_score must be in [-1, image_min_score)")

@@ -166,7 +166,7 @@ def propose(table: list[dict[str, float]]) -> dict[str, float] | None:
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m spacepose.tools.calibrate_gates", description=__doc__.split("\n")[0])
     p.add_argument("report", type=Path, nargs="+",
-                   help="pose_eval.json of eval-pose on train frames with both gates open (several: their frames pooled)")
+                   help="pose_eval.json of eval-pose on train frames with both gates open (several: frames pooled)")
     p.add_argument("--max-e-t", type=float, default=0.5, help="a pose farther off than this (m) is wrong")
     p.add_argument("--max-e-r", type=float, default=20.0, help="a pose turned more than this (deg) is wrong")
     p.add_argument("--out", type=Path, default=None, help="also write the table and proposal as JSON")
