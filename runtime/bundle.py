@@ -527,7 +527,8 @@ def _parse_silhouette(section: Any, n_points: int, has_registration: bool) -> Si
                             zero_ints=("seed", "iterations", "stereo_points", "reverse", "image_vote",
                                        "image_exclusion_px", "image_min_pixels"),
                             zero_numbers=("depth_margin_m", "min_margin_px", "range_weight", "image_min_score",
-                                          "image_min_margin_px", "image_max_background", "image_veto_score"))
+                                          "image_min_margin_px", "image_max_background", "image_veto_score",
+                                          "image_max_chamfer_px"))
     try:
         return SilhouetteConfig(**values)
     except ValueError as err:

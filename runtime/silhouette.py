@@ -79,6 +79,9 @@ class SilhouetteConfig:
         winner whenever it can vote, since a vote of 0 means the differing pixels are all dark, and
         in shadow the stereo outline that gave the margin is guessed too). 0 (the default, and every
         bundle without these keys) leaves the decision to the margin alone.
+    image_max_chamfer_px: the image route's own chamfer gate, when larger than ``max_chamfer_px``
+        (0: the same gate). An outline that fits less well (the stereo mask ragged at the edges) can
+        still be told from its flip by the image; the margin route keeps ``max_chamfer_px``.
     image_exclusion_px: band (frame px) around each outline left out of the vote.
     stop_rad, stop_m: a step smaller than both (rotation, translation) ends the refinement.
     depth_margin_m: the observed mask keeps pixels nearer than ``distance + depth_margin_m``.
@@ -105,6 +108,7 @@ class SilhouetteConfig:
     image_exclusion_px: int = 2
     image_min_pixels: int = 16
     image_veto_score: float = -0.1
+    image_max_chamfer_px: float = 0.0
     stop_rad: float = 2e-4
     stop_m: float = 2e-3
     seed: int = 0
@@ -117,7 +121,7 @@ class SilhouetteConfig:
         if not 0.0 <= self.range_weight <= 1.0:
             raise ValueError(f"invalid silhouette config {self}")
         if (self.image_vote not in (0, 1) or self.image_exclusion_px < 0 or self.image_min_pixels < 0
-                or not 0 <= self.image_max_background <= 1):
+                or not 0 <= self.image_max_background <= 1 or not self.image_max_chamfer_px >= 0):
             raise ValueError(f"invalid silhouette config {self}")
         if not -1.0 <= self.image_veto_score < self.image_min_score:
             raise ValueError(f"invalid silhouette config {self}: image_veto_score must be in [-1, image_min_score)")
@@ -348,13 +352,12 @@ class OutlineDecision:
 
     def decided(self, config: SilhouetteConfig) -> bool:
         """Whether the outline picks ``best``: a fine enough fit and a clear enough gap, or (with
-        ``config.image_vote``) a smaller gap that the image's lit pixels back (class docstring of
+        ``config.image_vote``) a smaller gap, and up to ``image_max_chamfer_px`` a looser fit, that the
+        image's lit pixels back; never when a usable vote vetoes it (class docstring of
         :class:`SilhouetteConfig`)."""
-        if not self.best.chamfer_px <= config.max_chamfer_px:
-            return False
         if self.image_vetoes(config):
             return False
-        if self.margin_px >= config.min_margin_px:
+        if self.best.chamfer_px <= config.max_chamfer_px and self.margin_px >= config.min_margin_px:
             return True
         return self.decided_by_image(config)
 
@@ -367,9 +370,11 @@ class OutlineDecision:
         return vote is not None and vote.score <= config.image_veto_score
 
     def decided_by_image(self, config: SilhouetteConfig) -> bool:
-        """Whether the image vote, with a margin of at least ``image_min_margin_px``, picks ``best``."""
+        """Whether the image vote, with a margin of at least ``image_min_margin_px`` and a chamfer within
+        the larger of ``max_chamfer_px`` and ``image_max_chamfer_px``, picks ``best``."""
         vote = self._usable_vote(config)
-        return bool(vote is not None and self.margin_px >= config.image_min_margin_px
+        fits = self.best.chamfer_px <= max(config.max_chamfer_px, config.image_max_chamfer_px)
+        return bool(vote is not None and fits and self.margin_px >= config.image_min_margin_px
                     and vote.score >= config.image_min_score)
 
 

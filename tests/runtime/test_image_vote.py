@@ -154,10 +154,25 @@ def test_a_veto_score_of_zero_asks_the_image_to_lean_to_the_winner(score, usable
     assert _decision(0.9, ImageVote(score, 400, 0.0, 0.1, usable), 1.0).decided(config) is decided
 
 
+@pytest.mark.parametrize("chamfer, margin, score, decided", [
+    (1.8, 0.3, 0.3, True),       # a looser fit the image backs
+    (1.8, 0.9, 0.05, False),     # ... but the margin route keeps its own chamfer gate
+    (2.2, 0.3, 0.3, False),      # beyond the image route's gate
+    (1.8, 0.1, 0.3, False),      # too small a margin
+])
+def test_the_image_route_has_its_own_chamfer_gate(chamfer, margin, score, decided):
+    config = SilhouetteConfig(max_chamfer_px=1.5, min_margin_px=0.5, image_vote=1, image_min_margin_px=0.2,
+                              image_max_chamfer_px=2.0)
+    assert _decision(margin, ImageVote(score, 400, 0.0, 0.1, True), chamfer).decided(config) is decided
+    # without it (0, the default) the image route keeps max_chamfer_px
+    plain = SilhouetteConfig(max_chamfer_px=1.5, min_margin_px=0.5, image_vote=1, image_min_margin_px=0.2)
+    assert not _decision(margin, ImageVote(score, 400, 0.0, 0.1, True), chamfer).decided(plain)
+
+
 def test_config_refuses_bad_image_settings():
     for bad in ({"image_vote": 2}, {"image_exclusion_px": -1}, {"image_max_background": 1.5},
                 {"image_min_pixels": -1}, {"image_veto_score": 0.1}, {"image_veto_score": -1.5},
-                {"image_min_score": 0.05, "image_veto_score": 0.05}):
+                {"image_min_score": 0.05, "image_veto_score": 0.05}, {"image_max_chamfer_px": -1.0}):
         with pytest.raises(ValueError):
             SilhouetteConfig(**bad)
 

@@ -120,5 +120,10 @@ def test_image_table_and_proposal(tmp_path, capsys):
     pooled = json.loads((tmp_path / "pooled.json").read_text())
     assert pooled["report"] == [str(report), str(extra)] and pooled["proposed"]["image_veto_score"] == 0.0
     assert "10 of 10 train frames valid" in capsys.readouterr().out
+    # the image route's own chamfer gate: a looser fit the image backs is kept, the margin route's is not
+    loose_fit = [_row(1.8, 0.3, 0.4, 3.0), _row(1.8, 0.9, 0.05, 4.0), _row(2.4, 0.3, 0.4, 177.0)]
+    by_gate = {r["image_max_chamfer_px"]: r for r in image_gate_table(
+        loose_fit, 1.5, 0.5, [0.2], [0.1], 0.02, max_e_t=0.5, max_e_r=20.0, pixels=[16], chamfers=[0.0, 2.0, 2.5])}
+    assert [(by_gate[c]["kept"], by_gate[c]["flips"]) for c in (0.0, 2.0, 2.5)] == [(0, 0), (1, 0), (2, 1)]
     assert (by_veto[-0.1]["flips"], by_veto[-0.1]["vetoed"]) == (1, 1)
     assert (by_veto[0.0]["flips"], by_veto[0.0]["vetoed"], by_veto[0.0]["kept"]) == (0, 2, 2)
