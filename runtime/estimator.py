@@ -522,7 +522,8 @@ class PoseEstimator:
                        f"the stereo depth (tolerance {reg.tau_m:.2f} m > {config.max_tau_m:.2f} m) is too coarse "
                        "to tell the pose from its flip")
                 if outline is not None:
-                    vote = "" if outline.vote is None else f", image vote {outline.vote.score:+.2f}"
+                    vote = ("" if outline.vote is None else
+                            f", image vote {outline.vote.score:+.2f} on {outline.vote.pixels} px")
                     why += (f"; the outline does not decide (chamfer {outline.best.chamfer_px:.2f} px, "
                             f"margin {outline.margin_px:.2f} px{vote})")
                 return _stage_invalid(stage, "weak_votes", factors), (

@@ -82,6 +82,10 @@ class SilhouetteConfig:
     image_max_chamfer_px: the image route's own chamfer gate, when larger than ``max_chamfer_px``
         (0: the same gate). An outline that fits less well (the stereo mask ragged at the edges) can
         still be told from its flip by the image; the margin route keeps ``max_chamfer_px``.
+    min_flip_pixels: with ``image_vote``, the fewest pixels in which the winner's outline and its exact
+        flip's must differ (the vote's ``pixels``) for the outline to decide anything, by margin or by
+        image: where they differ in fewer, the outline cannot tell the two apart, and a large margin
+        was measured against a rival that converged badly, not against the flip. 0 turns it off.
     image_exclusion_px: band (frame px) around each outline left out of the vote.
     stop_rad, stop_m: a step smaller than both (rotation, translation) ends the refinement.
     depth_margin_m: the observed mask keeps pixels nearer than ``distance + depth_margin_m``.
@@ -109,6 +113,7 @@ class SilhouetteConfig:
     image_min_pixels: int = 16
     image_veto_score: float = -0.1
     image_max_chamfer_px: float = 0.0
+    min_flip_pixels: int = 0
     stop_rad: float = 2e-4
     stop_m: float = 2e-3
     seed: int = 0
@@ -121,6 +126,7 @@ class SilhouetteConfig:
         if not 0.0 <= self.range_weight <= 1.0:
             raise ValueError(f"invalid silhouette config {self}")
         if (self.image_vote not in (0, 1) or self.image_exclusion_px < 0 or self.image_min_pixels < 0
+                or self.min_flip_pixels < 0
                 or not 0 <= self.image_max_background <= 1 or not self.image_max_chamfer_px >= 0):
             raise ValueError(f"invalid silhouette config {self}")
         if not -1.0 <= self.image_veto_score < self.image_min_score:
@@ -353,9 +359,10 @@ class OutlineDecision:
     def decided(self, config: SilhouetteConfig) -> bool:
         """Whether the outline picks ``best``: a fine enough fit and a clear enough gap, or (with
         ``config.image_vote``) a smaller gap, and up to ``image_max_chamfer_px`` a looser fit, that the
-        image's lit pixels back; never when a usable vote vetoes it (class docstring of
+        image's lit pixels back; never when a usable vote vetoes it or the winner's and its flip's
+        outlines differ in fewer than ``min_flip_pixels`` pixels (class docstring of
         :class:`SilhouetteConfig`)."""
-        if self.image_vetoes(config):
+        if self.image_vetoes(config) or self.too_few_flip_pixels(config):
             return False
         if self.best.chamfer_px <= config.max_chamfer_px and self.margin_px >= config.min_margin_px:
             return True
@@ -363,6 +370,11 @@ class OutlineDecision:
 
     def _usable_vote(self, config: SilhouetteConfig) -> ImageVote | None:
         return self.vote if config.image_vote and self.vote is not None and self.vote.usable else None
+
+    def too_few_flip_pixels(self, config: SilhouetteConfig) -> bool:
+        """Whether the vote (taken with ``image_vote``) counted fewer than ``min_flip_pixels`` pixels in
+        which the winner's outline and its flip's differ; False when no vote was taken."""
+        return bool(config.image_vote and self.vote is not None and self.vote.pixels < config.min_flip_pixels)
 
     def image_vetoes(self, config: SilhouetteConfig) -> bool:
         """Whether a usable image vote scores ``image_veto_score`` or less for ``best``."""

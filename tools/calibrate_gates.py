@@ -20,10 +20,11 @@ every frame the outline stage saw is valid in the report with its ``outline_cham
 ``--image``: the same evaluation with the silhouette stage's ``image_vote`` 1, so that every row also
 carries ``outline_image_score`` and ``outline_image_background``. The outline gates stay at
 ``--chamfer`` / ``--margin`` (the bundle's), and the grid is over the image route's
-``image_min_margin_px``, ``image_min_score``, ``image_min_pixels``, ``image_veto_score`` and
-``image_max_chamfer_px`` (``image_max_background`` fixed at ``--background``): a pose is kept when a
-usable vote does not score ``image_veto_score`` or less and either its chamfer and margin pass, or the
-image route does (its own chamfer gate, the larger of the two). Run the evaluation with ``image_min_pixels`` 0 and ``image_veto_score`` -1, so that every vote is
+``image_min_margin_px``, ``image_min_score``, ``image_min_pixels``, ``image_veto_score``,
+``image_max_chamfer_px`` and ``min_flip_pixels`` (``image_max_background`` fixed at ``--background``): a
+pose is kept when a usable vote does not score ``image_veto_score`` or less, the vote counted at least
+``min_flip_pixels`` differing pixels, and either its chamfer and margin pass, or the image route does
+(its own chamfer gate, the larger of the two). Run the evaluation with ``image_min_pixels`` 0 and ``image_veto_score`` -1, so that every vote is
 in the rows (a report made with a higher veto score tables only veto scores at or above it).
 """
 
@@ -103,9 +104,10 @@ def outline_gate_table(rows: Iterable[dict[str, Any]], chamfers: Sequence[float]
 def image_gate_table(rows: Iterable[dict[str, Any]], max_chamfer_px: float, min_margin_px: float,
                      image_margins: Sequence[float], scores: Sequence[float], max_background: float,
                      max_e_t: float, max_e_r: float, pixels: Sequence[int] = (0,),
-                     vetoes: Sequence[float] = (-0.1,), chamfers: Sequence[float] = (0.0,)) -> list[dict[str, float]]:
+                     vetoes: Sequence[float] = (-0.1,), chamfers: Sequence[float] = (0.0,),
+                     flip_pixels: Sequence[int] = (0,)) -> list[dict[str, float]]:
     """One row per (image_min_margin_px, image_min_score, image_min_pixels, image_veto_score,
-    image_max_chamfer_px) of the image route (module docstring; :class:`spacepose.silhouette.SilhouetteConfig`; a veto score not
+    image_max_chamfer_px, min_flip_pixels) of the image route (module docstring; :class:`spacepose.silhouette.SilhouetteConfig`; a veto score not
     below the min score is skipped): kept poses, how many of them the image route alone keeps and how
     many margin decisions its veto refuses, flips and wrong poses among the kept, and the mean errors
     of the kept poses that are not flips. A row without an image vote (NaN score) passes only by its
@@ -119,18 +121,19 @@ def image_gate_table(rows: Iterable[dict[str, Any]], max_chamfer_px: float, min_
     e_t, e_r, flip, wrong = _outcomes(ok, max_e_t, max_e_r)
     fits = chamfer <= max_chamfer_px
     table = []
-    for m, s, p, v, c in itertools.product(image_margins, scores, pixels, vetoes, chamfers):
+    for m, s, p, v, c, f in itertools.product(image_margins, scores, pixels, vetoes, chamfers, flip_pixels):
         if v >= s:
             continue
         fits_image = chamfer <= max(max_chamfer_px, c)
+        apart = ~np.isfinite(score) | (n_pixels >= f)   # no vote taken: nothing counted
         usable = np.isfinite(score) & (background <= max_background) & (n_pixels >= max(p, 1))
         veto = usable & (np.nan_to_num(score, nan=0.0) <= v)
-        by_margin = fits & (margin >= min_margin_px) & ~veto
-        by_image = fits_image & usable & ~veto & (margin >= m) & (np.nan_to_num(score, nan=-np.inf) >= s) & ~by_margin
+        by_margin = fits & (margin >= min_margin_px) & ~veto & apart
+        by_image = fits_image & usable & ~veto & apart & (margin >= m) & (np.nan_to_num(score, nan=-np.inf) >= s) & ~by_margin
         keep = by_margin | by_image
         good = keep & ~flip
         table.append({"image_min_margin_px": float(m), "image_min_score": float(s), "image_min_pixels": int(p),
-                      "image_veto_score": float(v), "image_max_chamfer_px": float(c),
+                      "image_veto_score": float(v), "image_max_chamfer_px": float(c), "min_flip_pixels": int(f),
                       "kept": int(keep.sum()), "by_image": int(by_image.sum()),
                       "vetoed": int((fits & (margin >= min_margin_px) & veto).sum()),
                       "flips": int((keep & flip).sum()), "wrong": int((keep & wrong).sum()),
@@ -145,7 +148,7 @@ def propose_image(table: list[dict[str, float]]) -> dict[str, float] | None:
     if not safe:
         return None
     return max(safe, key=lambda r: (r["kept"], r["image_min_margin_px"], r["image_min_score"], r["image_min_pixels"],
-                                    r["image_veto_score"], -r["image_max_chamfer_px"]))
+                                    r["image_veto_score"], -r["image_max_chamfer_px"], r["min_flip_pixels"]))
 
 
 def propose_outline(table: list[dict[str, float]]) -> dict[str, float] | None:
@@ -184,6 +187,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--vetoes", type=float, nargs="*", default=None, help="--image: image_veto_score grid")
     p.add_argument("--image-chamfers", type=float, nargs="*", default=None,
                    help="--image: image_max_chamfer_px grid (0: the margin route's --chamfer)")
+    p.add_argument("--flip-pixels", type=int, nargs="*", default=None, help="--image: min_flip_pixels grid")
     args = p.parse_args(argv)
     reports = [json.loads(path.read_text()) for path in args.report]
     if any(r.get("split") == "test" for r in reports):
@@ -241,23 +245,24 @@ def _main_image(args: argparse.Namespace, report: dict[str, Any], rows: list[dic
     scores = args.scores or [0.0, 0.05, 0.1, 0.15, 0.2, 0.3]
     table = image_gate_table(rows, args.chamfer, args.margin, margins, scores, args.background, args.max_e_t,
                              args.max_e_r, args.pixels or [0, 8, 16, 32], args.vetoes or [-0.1],
-                             args.image_chamfers or [0.0])
+                             args.image_chamfers or [0.0], args.flip_pixels or [0])
     best = propose_image(table)
     voted = sum(1 for r in rows if r.get("valid") and math.isfinite(_finite(r.get("outline_image_score"))))
     print(f"{sum(1 for r in rows if r.get('valid'))} of {len(rows)} {report.get('split')} frames valid with the gates "
           f"open, {voted} with an image vote; outline gates {args.chamfer} / {args.margin}, "
           f"image_max_background {args.background}")
-    print("| image_min_margin_px | image_min_score | image_min_pixels | image_veto_score | image_max_chamfer_px | kept "
-          "| by image | vetoed | flips | wrong | e_t mean m | e_R mean ° |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| image_min_margin_px | image_min_score | image_min_pixels | image_veto_score | image_max_chamfer_px "
+          "| min_flip_pixels | kept | by image | vetoed | flips | wrong | e_t mean m | e_R mean ° |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table:
         print(f"| {r['image_min_margin_px']:.2f} | {r['image_min_score']:.2f} | {r['image_min_pixels']} "
-              f"| {r['image_veto_score']:.2f} | {r['image_max_chamfer_px']:.2f} | {r['kept']} "
+              f"| {r['image_veto_score']:.2f} | {r['image_max_chamfer_px']:.2f} | {r['min_flip_pixels']} | {r['kept']} "
               f"| {r['by_image']} | {r['vetoed']} | {r['flips']} | {r['wrong']} | {r['e_t_mean']:.3f} "
               f"| {r['e_R_mean']:.2f} |")
     print("proposed:", "none (no setting keeps a pose without a flip)" if best is None else
           f"image_min_margin_px {best['image_min_margin_px']}, image_min_score {best['image_min_score']}, "
           f"image_min_pixels {best['image_min_pixels']}, image_veto_score {best['image_veto_score']}, "
-          f"image_max_chamfer_px {best['image_max_chamfer_px']} "
+          f"image_max_chamfer_px {best['image_max_chamfer_px']}, min_flip_pixels {best['min_flip_pixels']} "
           f"({best['kept']} poses kept, {best['by_image']} by the image)")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -169,10 +169,23 @@ def test_the_image_route_has_its_own_chamfer_gate(chamfer, margin, score, decide
     assert not _decision(margin, ImageVote(score, 400, 0.0, 0.1, True), chamfer).decided(plain)
 
 
+@pytest.mark.parametrize("pixels, image_on, decided", [
+    (7, 1, False),      # pose and flip differ in 7 px: the outline cannot tell them apart
+    (16, 1, True),
+    (7, 0, True),       # without the image vote nothing is counted
+])
+def test_min_flip_pixels_refuses_a_margin_the_flip_cannot_show(pixels, image_on, decided):
+    config = SilhouetteConfig(max_chamfer_px=1.5, min_margin_px=0.5, image_vote=image_on, min_flip_pixels=16)
+    dec = _decision(0.9, ImageVote(0.0, pixels, 0.0, 0.1, False), 1.0)
+    assert dec.decided(config) is decided
+    assert _decision(0.9, None, 1.0).decided(config)    # no vote taken: nothing counted, the margin decides
+
+
 def test_config_refuses_bad_image_settings():
     for bad in ({"image_vote": 2}, {"image_exclusion_px": -1}, {"image_max_background": 1.5},
                 {"image_min_pixels": -1}, {"image_veto_score": 0.1}, {"image_veto_score": -1.5},
-                {"image_min_score": 0.05, "image_veto_score": 0.05}, {"image_max_chamfer_px": -1.0}):
+                {"image_min_score": 0.05, "image_veto_score": 0.05}, {"image_max_chamfer_px": -1.0},
+                {"min_flip_pixels": -1}):
         with pytest.raises(ValueError):
             SilhouetteConfig(**bad)
 

@@ -125,5 +125,11 @@ def test_image_table_and_proposal(tmp_path, capsys):
     by_gate = {r["image_max_chamfer_px"]: r for r in image_gate_table(
         loose_fit, 1.5, 0.5, [0.2], [0.1], 0.02, max_e_t=0.5, max_e_r=20.0, pixels=[16], chamfers=[0.0, 2.0, 2.5])}
     assert [(by_gate[c]["kept"], by_gate[c]["flips"]) for c in (0.0, 2.0, 2.5)] == [(0, 0), (1, 0), (2, 1)]
+    # min_flip_pixels: a margin decision whose pose and flip differ in a handful of pixels is refused
+    few = [_row(0.7, 0.8, 0.0, 177.0, pixels=7), _row(0.7, 0.8, 0.2, 2.0, pixels=60), _row(0.7, 0.8, None, 3.0)]
+    by_floor = {r["min_flip_pixels"]: r for r in image_gate_table(
+        few, 1.5, 0.5, [0.2], [0.1], 0.02, max_e_t=0.5, max_e_r=20.0, pixels=[16], flip_pixels=[0, 16])}
+    assert (by_floor[0]["kept"], by_floor[0]["flips"]) == (3, 1)
+    assert (by_floor[16]["kept"], by_floor[16]["flips"]) == (2, 0)   # the row without a vote is not refused
     assert (by_veto[-0.1]["flips"], by_veto[-0.1]["vetoed"]) == (1, 1)
     assert (by_veto[0.0]["flips"], by_veto[0.0]["vetoed"], by_veto[0.0]["kept"]) == (0, 2, 2)
