@@ -34,6 +34,12 @@ window is a fixed multiple of the target's extent, so an outline pixel is a fixe
 target: the parts the flip moves are as many outline pixels across at 10 m as at 50 m, at
 640x480 as at 1280x960, and one gate serves every distance and rig (a far target, seen smaller
 than ``max_side_px``, gets a proportionally stricter gate in image pixels).
+
+*Image vote* (with ``image_vote``; :mod:`spacepose.image_vote`): the left image's lit pixels where
+the winner's outline and its exact flip's differ. It can decide a frame with a smaller margin (and,
+up to ``image_max_chamfer_px``, a looser fit), refuse one it does not back, and its pixel count
+refuses every frame whose pose and flip the outline cannot tell apart (``min_flip_pixels``;
+:class:`SilhouetteConfig`).
 """
 
 from __future__ import annotations
