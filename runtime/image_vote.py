@@ -27,6 +27,7 @@ on the sky right around it, not on any material or renderer.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -73,15 +74,21 @@ def grey_unit(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float32) / np.float32(scale)
 
 
-def crop_to_frame(values: np.ndarray, x0: int, y0: int, side: int, size: int) -> np.ndarray:
-    """(size, size) float32: the full-frame box ``(x0, y0, side)`` of ``values`` (H, W), zero outside
-    the image, area-resampled to ``size``."""
-    check_shape(values, (None, None), "values")
-    h, w = values.shape
+def crop_to_frame(values: np.ndarray, x0: int, y0: int, side: int, size: int,
+                  convert: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+    """(size, size) float32: the full-frame box ``(x0, y0, side)`` of ``values`` (H, W[, C]), zero
+    outside the image, area-resampled to ``size``. ``convert`` maps the part of the box inside the image
+    to (h, w) values first (so a threshold or a colour conversion touches the box only); without it
+    ``values`` must be (H, W)."""
+    a = np.asarray(values)
+    if convert is None:
+        check_shape(a, (None, None), "values")
+    h, w = a.shape[:2]
     crop = np.zeros((side, side), np.float32)
     xa, ya, xb, yb = max(x0, 0), max(y0, 0), min(x0 + side, w), min(y0 + side, h)
     if xb > xa and yb > ya:
-        crop[ya - y0:yb - y0, xa - x0:xb - x0] = values[ya:yb, xa:xb]
+        box = a[ya:yb, xa:xb]
+        crop[ya - y0:yb - y0, xa - x0:xb - x0] = box if convert is None else convert(box)
     if size != side:
         crop = cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA)
     return crop
@@ -90,11 +97,7 @@ def crop_to_frame(values: np.ndarray, x0: int, y0: int, side: int, size: int) ->
 def window_grey(image: np.ndarray, x0: int, y0: int, side: int, size: int) -> np.ndarray:
     """(size, size) float32 in [0, 1]: :func:`grey_unit` of the full-frame box ``(x0, y0, side)`` of
     ``image`` (H, W) or (H, W, C), converted after cropping (zero outside the image)."""
-    h, w = np.asarray(image).shape[:2]
-    xa, ya, xb, yb = max(x0, 0), max(y0, 0), min(x0 + side, w), min(y0 + side, h)
-    if xb <= xa or yb <= ya:
-        return np.zeros((size, size), np.float32)
-    return crop_to_frame(grey_unit(image[ya:yb, xa:xb]), x0 - xa, y0 - ya, side, size)
+    return crop_to_frame(image, x0, y0, side, size, convert=grey_unit)
 
 
 def image_vote(grey: np.ndarray, mask_a: np.ndarray, mask_b: np.ndarray, *, exclusion_px: int = 2,

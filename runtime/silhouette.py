@@ -198,13 +198,8 @@ def splat_mask(points: np.ndarray, R: np.ndarray, t: np.ndarray, frame: Silhouet
 def observed_mask(disparity: np.ndarray, frame: SilhouetteFrame, min_disparity: float) -> np.ndarray:
     """(n, n) uint8: full-frame ``disparity`` (H, W) > ``min_disparity`` over ``frame``'s box."""
     check_shape(disparity, (None, None), "disparity")
-    h, w = disparity.shape
-    x0, y0 = frame.x0, frame.y0
-    xa, ya, xb, yb = max(x0, 0), max(y0, 0), min(x0 + frame.side, w), min(y0 + frame.side, h)
-    if xb <= xa or yb <= ya:
-        return np.zeros((frame.size, frame.size), np.uint8)
-    near = (np.asarray(disparity[ya:yb, xa:xb]) > min_disparity).astype(np.float32)   # threshold the box only
-    crop = crop_to_frame(near, x0 - xa, y0 - ya, frame.side, frame.size)
+    crop = crop_to_frame(disparity, frame.x0, frame.y0, frame.side, frame.size,
+                         convert=lambda box: (box > min_disparity).astype(np.float32))   # threshold the box only
     return (crop > 0.5).astype(np.uint8)
 
 

@@ -212,12 +212,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     print("proposed:", "none (no set keeps a pose without a flip or a wrong pose)" if best is None else
           f"min_confidence {best['min_confidence']}, min_flip_margin {best['min_flip_margin']}, "
           f"max_tau_m {best['max_tau_m']:g} ({best['kept']} poses kept)")
+    _write_out(args, {}, table, best)
+    return 0
+
+
+def _write_out(args: argparse.Namespace, settings: dict[str, Any], table: list[dict[str, float]],
+               best: dict[str, float] | None) -> None:
+    """With ``--out``: the reports, the error bounds, the mode's fixed ``settings``, the table and the proposal."""
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"report": [str(path) for path in args.report], "max_e_t": args.max_e_t,
-                                        "max_e_r": args.max_e_r,
-                                        "table": table, "proposed": best}, indent=2))
-    return 0
+                                        "max_e_r": args.max_e_r, **settings, "table": table, "proposed": best},
+                                       indent=2))
 
 
 def _main_outline(args: argparse.Namespace, report: dict[str, Any], rows: list[dict[str, Any]]) -> int:
@@ -232,11 +238,7 @@ def _main_outline(args: argparse.Namespace, report: dict[str, Any], rows: list[d
               f"| {r['e_t_mean']:.3f} | {r['e_R_mean']:.2f} |")
     print("proposed:", "none (no pair keeps a pose without a flip)" if best is None else
           f"max_chamfer_px {best['max_chamfer_px']}, min_margin_px {best['min_margin_px']} ({best['kept']} poses kept)")
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"report": [str(path) for path in args.report], "max_e_t": args.max_e_t,
-                                        "max_e_r": args.max_e_r,
-                                        "outline": True, "table": table, "proposed": best}, indent=2))
+    _write_out(args, {"outline": True}, table, best)
     return 0
 
 
@@ -264,13 +266,8 @@ def _main_image(args: argparse.Namespace, report: dict[str, Any], rows: list[dic
           f"image_min_pixels {best['image_min_pixels']}, image_veto_score {best['image_veto_score']}, "
           f"image_max_chamfer_px {best['image_max_chamfer_px']}, min_flip_pixels {best['min_flip_pixels']} "
           f"({best['kept']} poses kept, {best['by_image']} by the image)")
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"report": [str(path) for path in args.report], "max_e_t": args.max_e_t,
-                                        "max_e_r": args.max_e_r,
-                                        "image": True, "max_chamfer_px": args.chamfer, "min_margin_px": args.margin,
-                                        "image_max_background": args.background, "table": table, "proposed": best},
-                                       indent=2))
+    _write_out(args, {"image": True, "max_chamfer_px": args.chamfer, "min_margin_px": args.margin,
+                      "image_max_background": args.background}, table, best)
     return 0
 
 
