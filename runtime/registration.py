@@ -30,7 +30,7 @@ import numpy as np
 from .errors import check_shape
 
 __all__ = ["RegistrationConfig", "SurfaceLookup", "SurfaceModel", "RegistrationResult", "start_rotations", "register",
-           "select_with_prior", "near_prior", "rotation_angle_deg", "exp_so3"]
+           "select_with_prior", "near_prior", "rotation_angle_deg", "exp_so3", "cross_into"]
 
 
 @dataclass(frozen=True)
@@ -121,13 +121,12 @@ def exp_so3(w: np.ndarray) -> np.ndarray:
     """(..., 3) rotation vectors -> (..., 3, 3) (Rodrigues)."""
     angle = np.linalg.norm(w, axis=-1, keepdims=True)
     k = w / np.maximum(angle, 1e-12)
-    zero = np.zeros_like(k[..., 0])
-    K = np.stack([np.stack([zero, -k[..., 2], k[..., 1]], -1),
-                  np.stack([k[..., 2], zero, -k[..., 0]], -1),
-                  np.stack([-k[..., 1], k[..., 0], zero], -1)], -2)
+    K = np.zeros(k.shape + (3,), dtype=k.dtype)                          # the skew matrix of k
+    K[..., 0, 1], K[..., 0, 2] = -k[..., 2], k[..., 1]
+    K[..., 1, 0], K[..., 1, 2] = k[..., 2], -k[..., 0]
+    K[..., 2, 0], K[..., 2, 1] = -k[..., 1], k[..., 0]
     a = angle[..., None]
-    eye = np.broadcast_to(np.eye(3), K.shape)
-    return eye + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)
+    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)
 
 
 class SurfaceLookup:
@@ -158,6 +157,7 @@ class SurfaceLookup:
         self.shape = tuple(int(v) for v in np.ceil((self.points.max(axis=0) + self.reach - self.origin) / self.cell) + 1)
         self.grid = self._fill()
         self._flat = self.grid.reshape(-1)
+        self._samples = np.concatenate([self.points, self.normals], axis=1)   # (M, 6): one gather for both
 
     def _fill(self) -> np.ndarray:
         r = int(math.ceil(self.reach / self.cell))
@@ -190,16 +190,24 @@ class SurfaceLookup:
 
     def query(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(..., 3) object-frame points -> (index (...,) int64, -1 for none; distance (...,), inf for none)."""
+        idx, _, _, dist = self.lookup(X)
+        return idx, dist
+
+    def lookup(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`query` with what it gathered on the way: ``(index, sample (..., 3), its normal
+        (..., 3), distance)``; the sample and normal of index 0 where the index is -1."""
         cells = np.rint((X - self.origin) * (1.0 / self.cell)).astype(np.int64)
         s0, s1, s2 = self.shape
-        inside = ((cells[..., 0] >= 0) & (cells[..., 0] < s0) & (cells[..., 1] >= 0) & (cells[..., 1] < s1)
-                  & (cells[..., 2] >= 0) & (cells[..., 2] < s2))
+        u = cells.view(np.uint64)   # one unsigned comparison per axis: a negative cell wraps to a huge one
+        inside = (u[..., 0] < s0) & (u[..., 1] < s1) & (u[..., 2] < s2)
         flat = (cells[..., 0] * s1 + cells[..., 1]) * s2 + cells[..., 2]
         idx = self._flat[np.where(inside, flat, 0)]
         idx[~inside] = -1
-        diff = X - self.points[np.maximum(idx, 0)]
+        both = np.take(self._samples, np.maximum(idx, 0), axis=0)
+        sample = both[..., :3]
+        diff = X - sample
         dist = np.sqrt(np.einsum("...i,...i->...", diff, diff))
-        return idx, np.where(idx >= 0, dist, np.inf)
+        return idx, sample, both[..., 3:], np.where(idx >= 0, dist, np.inf)
 
 
 class SurfaceModel:
@@ -231,19 +239,29 @@ class SurfaceModel:
         (inf beyond). The fine grid answers where it reaches; the coarse one beyond it. A reach of
         more than twice the fine grid's (the first, wide ICP iterations) reads the coarse grid alone."""
         if reach_m > 2.0 * self.fine.reach:
-            idx, dist = self.coarse.query(X)
-            pts, nrm = self.coarse.points[np.maximum(idx, 0)], self.coarse.normals[np.maximum(idx, 0)]
+            _, pts, nrm, dist = self.coarse.lookup(X)
             return pts, nrm, np.where(dist <= reach_m, dist, np.inf)
-        idx, dist = self.fine.query(X)
-        pts, nrm = self.fine.points[np.maximum(idx, 0)], self.fine.normals[np.maximum(idx, 0)]
+        idx, pts, nrm, dist = self.fine.lookup(X)
         if reach_m > self.fine.reach:
             far = idx < 0
             if far.any():
-                idx_c, dist_c = self.coarse.query(X[far])
-                pts[far] = self.coarse.points[np.maximum(idx_c, 0)]
-                nrm[far] = self.coarse.normals[np.maximum(idx_c, 0)]
+                _, pts_c, nrm_c, dist_c = self.coarse.lookup(X[far])
+                pts[far] = pts_c
+                nrm[far] = nrm_c
                 dist[far] = dist_c
         return pts, nrm, np.where(dist <= reach_m, dist, np.inf)
+
+    def distance(self, X: np.ndarray, reach_m: float) -> np.ndarray:
+        """The distance part of :meth:`query` alone (no normals gathered)."""
+        if reach_m > 2.0 * self.fine.reach:
+            _, dist = self.coarse.query(X)
+            return np.where(dist <= reach_m, dist, np.inf)
+        idx, dist = self.fine.query(X)
+        if reach_m > self.fine.reach:
+            far = idx < 0
+            if far.any():
+                dist[far] = self.coarse.query(X[far])[1]
+        return np.where(dist <= reach_m, dist, np.inf)
 
 
 @dataclass(frozen=True, eq=False)
@@ -275,6 +293,15 @@ class RegistrationResult:
         return self.runner_up_score - self.score
 
 
+def cross_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """``out[...] = np.cross(a, b)`` for (..., 3) arrays, with the same products and differences (bit-equal)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+
+
 def _icp(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, reaches: list[float]
          ) -> tuple[np.ndarray, np.ndarray]:
     """Batched point-to-plane ICP of K poses (K, 3, 3), (K, 3) to the points P (N, 3)."""
@@ -282,7 +309,9 @@ def _icp(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, reach
         X = (P[None] - t[:, None, :]) @ R                                     # R^T (P - t), (K, N, 3)
         q, n, dist = model.query(X, reach)
         w = np.isfinite(dist).astype(np.float64)
-        A = np.concatenate([np.cross(X, n), n], axis=-1)                      # (K, N, 6)
+        A = np.empty(X.shape[:-1] + (6,))                                     # (K, N, 6): [X x n, n]
+        cross_into(X, n, A[..., :3])
+        A[..., 3:] = n
         b = np.einsum("kni,kni->kn", n, q - X)
         Aw = A * w[..., None]
         H = np.swapaxes(Aw, 1, 2) @ A + 1e-6 * np.eye(6)
@@ -359,7 +388,7 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
     else:
         runner, runner_angle, R_run, t_run = float("inf"), 0.0, np.full((3, 3), np.nan), np.full(3, np.nan)
     X = (P - t[best]) @ R[best]
-    _, _, dist = model.query(X, tau)
+    dist = model.distance(X, tau)
     return RegistrationResult(R=R[best], t=t[best], score=float(score[best]), runner_up_score=runner,
                               runner_up_angle_deg=runner_angle, runner_up_R=R_run, runner_up_t=t_run,
                               inlier_fraction=float(np.mean(dist < tau)), tau_m=float(tau), starts=len(R0),
@@ -388,5 +417,5 @@ def near_prior(R: np.ndarray, t: np.ndarray, R_prior: np.ndarray, t_prior: np.nd
 
 def _scene_cost(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, tau: float) -> np.ndarray:
     X = (P[None] - t[:, None, :]) @ R
-    _, _, dist = model.query(X, tau)
+    dist = model.distance(X, tau)
     return np.mean(np.minimum(dist, tau) ** 2, axis=1) / tau ** 2

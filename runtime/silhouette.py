@@ -53,7 +53,7 @@ import numpy as np
 
 from .errors import check_shape
 from .image_vote import ImageVote, crop_to_frame, image_vote, window_grey
-from .registration import SurfaceModel, exp_so3, rotation_angle_deg
+from .registration import SurfaceModel, cross_into, exp_so3, rotation_angle_deg
 
 __all__ = ["SilhouetteConfig", "SilhouetteFrame", "OutlineFit", "OutlineDecision", "silhouette_frame",
            "splat_mask", "observed_mask", "contour", "chamfer_px", "refine_outline", "decide_outline"]
@@ -174,7 +174,10 @@ def silhouette_frame(K_full: np.ndarray, x0: int, y0: int, side: int, max_side_p
 
 def _project(X_cam: np.ndarray, K: np.ndarray) -> np.ndarray:
     z = np.maximum(X_cam[:, 2], 1e-6)
-    return np.stack([K[0, 0] * X_cam[:, 0] / z + K[0, 2], K[1, 1] * X_cam[:, 1] / z + K[1, 2]], axis=1)
+    uv = np.empty((len(X_cam), 2), dtype=np.result_type(X_cam, K))
+    np.add(K[0, 0] * X_cam[:, 0] / z, K[0, 2], out=uv[:, 0])
+    np.add(K[1, 1] * X_cam[:, 1] / z, K[1, 2], out=uv[:, 1])
+    return uv
 
 
 def splat_mask(points: np.ndarray, R: np.ndarray, t: np.ndarray, frame: SilhouetteFrame
@@ -184,15 +187,27 @@ def splat_mask(points: np.ndarray, R: np.ndarray, t: np.ndarray, frame: Silhouet
 
     Returns ``(mask (n, n) uint8 after a 3x3 closing, pixel (S, 2) int column/row, inside (S,) bool)``.
     """
+    mask, ij, _, inside = _splat(points, R, t, frame)
+    return mask, ij, inside
+
+
+def _splat(points: np.ndarray, R: np.ndarray, t: np.ndarray, frame: SilhouetteFrame
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`splat_mask` plus each sample's row-major pixel index (S,) int64 (meaningful where inside)."""
     n = frame.size
     R32, t32 = np.asarray(R, dtype=points.dtype), np.asarray(t, dtype=points.dtype)
     X = points @ R32.T + t32
     uv = _project(X, frame.K.astype(points.dtype))
-    ij = np.rint(np.clip(np.nan_to_num(uv, nan=-1.0), -1.0, float(n))).astype(np.int32)   # no int overflow
-    inside = (ij[:, 0] >= 0) & (ij[:, 0] < n) & (ij[:, 1] >= 0) & (ij[:, 1] < n) & (X[:, 2] > 1e-3)
+    if not np.isfinite(uv).all():
+        uv = np.nan_to_num(uv, nan=-1.0)
+    np.clip(uv, -1.0, float(n), out=uv)        # before the cast: no int overflow
+    ij = np.rint(uv, out=uv).astype(np.int32)
+    u = ij.view(np.uint32)                      # a negative pixel wraps to a huge one
+    inside = (u[:, 0] < n) & (u[:, 1] < n) & (X[:, 2] > 1e-3)
+    flat = ij[:, 1].astype(np.int64) * n + ij[:, 0]
     mask = np.zeros((n, n), np.uint8)
-    mask[ij[inside, 1], ij[inside, 0]] = 1
-    return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _KERNEL), ij, inside
+    mask.reshape(-1)[flat[inside]] = 1
+    return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _KERNEL), ij, flat, inside
 
 
 def observed_mask(disparity: np.ndarray, frame: SilhouetteFrame, min_disparity: float) -> np.ndarray:
@@ -205,8 +220,7 @@ def observed_mask(disparity: np.ndarray, frame: SilhouetteFrame, min_disparity: 
 
 def contour(mask: np.ndarray) -> np.ndarray:
     """(n, n) bool: pixels of ``mask`` with a background 8-neighbour (or on the frame's edge)."""
-    padded = cv2.copyMakeBorder(mask, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
-    return (mask > 0) & (cv2.erode(padded, _KERNEL)[1:-1, 1:-1] == 0)
+    return (mask > 0) & (cv2.erode(mask, _KERNEL, borderType=cv2.BORDER_CONSTANT, borderValue=0) == 0)
 
 
 def _outline_unit(frame: SilhouetteFrame, config: SilhouetteConfig) -> float:
@@ -260,6 +274,8 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
     dist, labels = cv2.distanceTransformWithLabels((~edge).astype(np.uint8), cv2.DIST_L2, 5,
                                                    labelType=cv2.DIST_LABEL_PIXEL)
     ey, ex = np.nonzero(edge)   # label k (1-based) is the k-th edge pixel in row-major order
+    e_flat = ey.astype(np.int64) * edge.shape[1] + ex
+    dist_flat, labels_flat = dist.reshape(-1), labels.reshape(-1)
     rng = np.random.default_rng(config.seed)
     P = None
     if stereo_points is not None and surface is not None and config.stereo_points > 0:
@@ -268,26 +284,26 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
         P = P[rng.permutation(len(P))[: config.stereo_points]] if len(P) >= 12 else None
     if len(ey) >= 12:
         for _ in range(config.iterations):
-            mask, ij, inside = splat_mask(silhouette_points, R, t, frame)
+            mask, _, flat, inside = _splat(silhouette_points, R, t, frame)
             on = np.flatnonzero(inside)
-            on = on[contour(mask)[ij[on, 1], ij[on, 0]]]
+            on = on[contour(mask).reshape(-1)[flat[on]]]
             if len(on) < 12:
                 break
             # model contour -> nearest observed contour pixel
-            fwd = on[dist[ij[on, 1], ij[on, 0]] < config.trunc_px]
-            k = labels[ij[fwd, 1], ij[fwd, 0]] - 1
+            fwd = on[dist_flat[flat[on]] < config.trunc_px]
+            k = labels_flat[flat[fwd]] - 1
             fwd_target = np.stack([ex[k], ey[k]], axis=1)
             if config.reverse:
                 # observed contour pixel -> nearest model contour sample (pulls the model over what it misses)
-                ids = np.full(mask.shape, -1, np.int64)
-                ids[ij[on, 1], ij[on, 0]] = on
-                m_edge = ids >= 0
+                ids = np.full(mask.size, -1, np.int64)
+                ids[flat[on]] = on
+                m_edge = ids.reshape(mask.shape) >= 0
                 m_dist, m_lab = cv2.distanceTransformWithLabels((~m_edge).astype(np.uint8), cv2.DIST_L2, 5,
                                                                 labelType=cv2.DIST_LABEL_PIXEL)
-                my, mx = np.nonzero(m_edge)
-                near = m_dist[ey, ex] < config.trunc_px
-                kk = m_lab[ey[near], ex[near]] - 1
-                rev = ids[my[kk], mx[kk]]
+                m_flat = np.flatnonzero(m_edge)   # label k (1-based) is the k-th edge pixel in row-major order
+                near = m_dist.reshape(-1)[e_flat] < config.trunc_px
+                kk = m_lab.reshape(-1)[e_flat[near]] - 1
+                rev = ids[m_flat[kk]]
                 rev_target = np.stack([ex[near], ey[near]], axis=1)
                 fwd, fwd_target = np.concatenate([fwd, rev]), np.concatenate([fwd_target, rev_target])
             if len(fwd) < 12:
@@ -322,7 +338,9 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
                     qc = q[ok] @ R.T + t
                     nc = nrm[ok] @ R.T
                     e = np.einsum("ij,ij->i", nc, qc - P[ok])                # model minus data along n
-                    Js = np.concatenate([np.cross(qc, nc), nc], axis=1)      # d e / d(w, v)
+                    Js = np.empty((len(qc), 6))                               # d e / d(w, v): [q x n, n]
+                    cross_into(qc, nc, Js[:, :3])
+                    Js[:, 3:] = nc
                     ws = 1.0 / (ok.sum() * tau_m ** 2)
                     H += ws * Js.T @ Js
                     g += ws * Js.T @ e

@@ -17,8 +17,8 @@ from spacepose.errors import BundleError  # noqa: E402
 from spacepose.estimator import PoseEstimator  # noqa: E402
 from spacepose.flip import flipped_pose  # noqa: E402
 from spacepose.metrics import rotation_error_deg  # noqa: E402
-from spacepose.registration import (RegistrationConfig, SurfaceLookup, SurfaceModel, register,  # noqa: E402
-                                    rotation_angle_deg, start_rotations)
+from spacepose.registration import (RegistrationConfig, SurfaceLookup, SurfaceModel, cross_into,  # noqa: E402
+                                    exp_so3, register, rotation_angle_deg, start_rotations)
 
 K = np.array([[800.0, 0, 319.5], [0, 800.0, 239.5], [0, 0, 1]])
 
@@ -96,6 +96,42 @@ def test_surface_lookup_against_a_kd_tree():
     assert np.all(dist[found] >= true_d[found] - 1e-12)
     assert np.all(dist[found] <= true_d[found] + 2 * 0.05 * np.sqrt(3))
     assert np.all(np.isinf(dist[~found]))
+
+
+def test_surface_lookup_gathers_the_sample_and_its_normal():
+    pts, nrm = _asymmetric_target()
+    lookup = SurfaceLookup(pts, nrm, cell_m=0.05, reach_m=0.3)
+    q = np.random.default_rng(1).uniform(-3, 3, (2, 700, 3))    # batched (K, N, 3), some beyond the grid
+    idx, sample, normal, dist = lookup.lookup(q)
+    assert idx.shape == dist.shape == (2, 700) and sample.shape == normal.shape == (2, 700, 3)
+    np.testing.assert_array_equal(sample, pts[np.maximum(idx, 0)])
+    np.testing.assert_array_equal(normal, nrm[np.maximum(idx, 0)])
+    idx_q, dist_q = lookup.query(q)
+    np.testing.assert_array_equal(idx_q, idx)
+    np.testing.assert_array_equal(dist_q, dist)
+    assert (idx < 0).any() and (idx >= 0).any()
+
+
+@pytest.mark.parametrize("reach", [0.1, 0.3, 0.5, 2.0])   # fine grid alone, fine + coarse, coarse alone
+def test_surface_model_distance_is_the_distance_query_gives(reach):
+    pts, nrm = _asymmetric_target()
+    model = SurfaceModel(pts, nrm)
+    q = np.random.default_rng(2).uniform(-3, 3, (3, 500, 3))
+    np.testing.assert_array_equal(model.distance(q, reach), model.query(q, reach)[2])
+
+
+def test_cross_into_is_bit_equal_to_numpy_cross():
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(4, 50, 3)) * 1e3, rng.normal(size=(4, 50, 3))
+    out = np.empty((4, 50, 6))
+    cross_into(a, b, out[..., :3])
+    np.testing.assert_array_equal(out[..., :3], np.cross(a, b))
+
+
+def test_exp_so3_matches_scipy():
+    w = np.concatenate([Rotation.random(30, random_state=4).as_rotvec(), np.zeros((1, 3)), [[1e-9, 0, 0]]])
+    np.testing.assert_allclose(exp_so3(w), Rotation.from_rotvec(w).as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(exp_so3(w[3]), Rotation.from_rotvec(w[3]).as_matrix(), atol=1e-12)
 
 
 def test_surface_lookup_refuses_bad_arguments():

@@ -90,6 +90,30 @@ def test_splat_and_contour_of_a_disc():
     np.testing.assert_allclose(np.hypot(xs - centre[0], ys - centre[1]), radius_px, atol=1.5)
 
 
+def test_splat_matches_opencv_projection():
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(-2.0, 2.0, (5000, 3))
+    R, t = _pose((20, -35, 50), (0.6, -0.4, 18.0))
+    frame = silhouette_frame(K, 180, 100, 300, 150)
+    mask, ij, inside = splat_mask(pts, R, t, frame)
+    uv, _ = cv2.projectPoints(pts, cv2.Rodrigues(R)[0], t, frame.K, None)
+    ref = np.rint(uv[:, 0]).astype(int)
+    ref_inside = np.all((ref >= 0) & (ref < frame.size), axis=1)
+    np.testing.assert_array_equal(inside, ref_inside)
+    np.testing.assert_array_equal(ij[inside], ref[inside])
+    raw = np.zeros((frame.size, frame.size), np.uint8)
+    raw[ref[ref_inside, 1], ref[ref_inside, 0]] = 1
+    np.testing.assert_array_equal(mask, cv2.morphologyEx(raw, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)))
+
+
+def test_contour_is_the_mask_pixels_with_a_background_neighbour():
+    mask = (np.random.default_rng(6).uniform(size=(40, 50)) < 0.7).astype(np.uint8)
+    padded = np.pad(mask, 1)
+    shifted = [padded[1 + dy:41 + dy, 1 + dx:51 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    ref = (mask > 0) & np.any([s == 0 for s in shifted], axis=0)
+    np.testing.assert_array_equal(contour(mask), ref)
+
+
 def test_observed_mask_crops_thresholds_and_pads():
     disp = np.zeros((480, 640), np.float32)
     disp[200:260, 300:380] = 20.0
