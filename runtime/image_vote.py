@@ -67,7 +67,15 @@ def grey_unit(image: np.ndarray) -> np.ndarray:
         if a.shape[2] not in (1, 3, 4):
             raise ValueError(f"image: expected (H, W) or (H, W, 1|3|4), got {a.shape}")
         a = a[:, :, :3] if a.shape[2] == 4 else a
-        a = a.astype(np.float32).mean(axis=2) if a.shape[2] > 1 else a[:, :, 0]
+        if a.shape[2] == 1:
+            a = a[:, :, 0]
+        elif a.dtype in (np.uint8, np.uint16):   # an exact sum (< 2**24), one rounding: equal to .mean(axis=2)
+            total = a[:, :, 0].astype(np.uint32)
+            total += a[:, :, 1]
+            total += a[:, :, 2]
+            a = total.astype(np.float32) / np.float32(3)
+        else:
+            a = a.astype(np.float32).mean(axis=2)
     elif a.ndim != 2:
         raise ValueError(f"image: expected (H, W) or (H, W, C), got {a.shape}")
     scale = 65535.0 if np.asarray(image).dtype == np.uint16 else 255.0

@@ -102,6 +102,15 @@ def test_grey_unit_scales_by_dtype_and_averages_channels():
     assert grey_unit(np.full((2, 2), 127.5, np.float32))[0, 0] == pytest.approx(0.5)
 
 
+@pytest.mark.parametrize("dtype, full", [(np.uint8, 255.0), (np.uint16, 65535.0), (np.float32, 255.0)])
+def test_grey_unit_of_colour_equals_the_channel_mean_bit_for_bit(dtype, full):
+    rng = np.random.default_rng(7)
+    colour = (rng.uniform(0, full + 1, (31, 17, 3)) // (1 if dtype != np.float32 else 0.001)).astype(dtype)
+    ref = colour.astype(np.float32).mean(axis=2) / np.float32(full)
+    np.testing.assert_array_equal(grey_unit(colour), ref)
+    np.testing.assert_array_equal(grey_unit(np.dstack([colour, colour[..., :1]])), ref)   # alpha dropped
+
+
 def test_window_grey_crops_pads_and_resamples_like_opencv():
     rng = np.random.default_rng(1)
     image = rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
