@@ -51,7 +51,7 @@ from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
-from .silhouette import decide_outline
+from .silhouette import decide_outline, polish_pose
 
 __all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
 
@@ -99,6 +99,9 @@ class PoseResult:
             that pose against its flip, the lit share of the sky ring around them, and how many pixels
             their outlines differ in (:mod:`spacepose.image_vote`); NaN when the vote was not taken.
             Not part of the JSON line.
+        polish_deg, polish_m: how far the silhouette stage's polish (``polish`` of the bundle's
+            ``silhouette`` section, :func:`spacepose.silhouette.polish_pose`) moved the decided pose; NaN
+            when it did not run or was not used. Not part of the JSON line.
     """
 
     R: np.ndarray
@@ -120,6 +123,8 @@ class PoseResult:
     outline_image_score: float = float("nan")
     outline_image_background: float = float("nan")
     outline_image_pixels: float = float("nan")
+    polish_deg: float = float("nan")
+    polish_m: float = float("nan")
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -383,7 +388,8 @@ class PoseEstimator:
                             outline_margin_px=factor("outline_margin_px"),
                             outline_image_score=factor("outline_image_score"),
                             outline_image_background=factor("outline_image_background"),
-                            outline_image_pixels=factor("outline_image_pixels"))
+                            outline_image_pixels=factor("outline_image_pixels"),
+                            polish_deg=factor("polish_deg"), polish_m=factor("polish_m"))
         if status != "bad_input":  # a bad frame says nothing about where the target is
             with self._lock:
                 self._prior = result
@@ -539,6 +545,14 @@ class PoseEstimator:
             # wrong and nothing says which; report neither, and the next frame starts without a prior
             return _stage_invalid(stage, "weak_votes", factors), (
                 f"the pose is {turned:.0f}° from the previous frame's valid pose")
+        if outline is not None and sil.polish:
+            with timer.stage("silhouette"):
+                polished = polish_pose(outline, R, t, self._outline_points, sil, stereo_points=xyz,
+                                       surface=self._registration, tau_m=reg.tau_m)
+            if polished is not None:
+                factors.update(polish_deg=float(rotation_angle_deg(R, polished.R)),
+                               polish_m=float(np.linalg.norm(polished.t - np.asarray(t))))
+                R, t = polished.R, polished.t
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),

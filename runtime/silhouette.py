@@ -44,6 +44,7 @@ refuses every frame whose pose and flip the outline cannot tell apart (``min_fli
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -56,7 +57,8 @@ from .image_vote import ImageVote, crop_to_frame, image_vote, window_grey
 from .registration import SurfaceModel, cross_into, exp_so3, rotation_angle_deg
 
 __all__ = ["SilhouetteConfig", "SilhouetteFrame", "OutlineFit", "OutlineDecision", "silhouette_frame",
-           "splat_mask", "observed_mask", "contour", "chamfer_px", "refine_outline", "decide_outline"]
+           "splat_mask", "observed_mask", "contour", "chamfer_px", "refine_outline", "decide_outline",
+           "polish_pose"]
 
 _KERNEL = np.ones((3, 3), np.uint8)
 
@@ -92,6 +94,15 @@ class SilhouetteConfig:
         flip's must differ (the vote's ``pixels``) for the outline to decide anything, by margin or by
         image: where they differ in fewer, the outline cannot tell the two apart, and a large margin
         was measured against a rival that converged badly, not against the flip. 0 turns it off.
+    polish: 1 refines a decided pose once more against the outline (:func:`polish_pose`), with the
+        contours' pull along the line of sight at ``polish_range_weight``: the decision stays the
+        one made with ``range_weight``; the pose reported is polished. 0 (the default, and every bundle
+        without the key) reports the decided pose as it is.
+    polish_range_weight: in [0, 1], ``range_weight`` of the polish. The range from the stereo points
+        alone (0) comes out a little far and the outline's alone (1) a little near (the stereo outline
+        is a little too large); the polish weighs the two.
+    polish_max_deg, polish_max_m: a polish that moves the pose farther than either is not used (the
+        decided pose is reported): it refines, it must not turn the pose into another one.
     image_exclusion_px: band (frame px) around each outline left out of the vote.
     stop_rad, stop_m: a step smaller than both (rotation, translation) ends the refinement.
     depth_margin_m: the observed mask keeps pixels nearer than ``distance + depth_margin_m``.
@@ -120,6 +131,10 @@ class SilhouetteConfig:
     image_veto_score: float = -0.1
     image_max_chamfer_px: float = 0.0
     min_flip_pixels: int = 0
+    polish: int = 0
+    polish_range_weight: float = 0.25
+    polish_max_deg: float = 15.0
+    polish_max_m: float = 1.0
     stop_rad: float = 2e-4
     stop_m: float = 2e-3
     seed: int = 0
@@ -134,6 +149,9 @@ class SilhouetteConfig:
         if (self.image_vote not in (0, 1) or self.image_exclusion_px < 0 or self.image_min_pixels < 0
                 or self.min_flip_pixels < 0
                 or not 0 <= self.image_max_background <= 1 or not self.image_max_chamfer_px >= 0):
+            raise ValueError(f"invalid silhouette config {self}")
+        if (self.polish not in (0, 1) or not 0.0 <= self.polish_range_weight <= 1.0
+                or not self.polish_max_deg > 0 or not self.polish_max_m > 0):
             raise ValueError(f"invalid silhouette config {self}")
         if not -1.0 <= self.image_veto_score < self.image_min_score:
             raise ValueError(f"invalid silhouette config {self}: image_veto_score must be in [-1, image_min_score)")
@@ -366,7 +384,8 @@ class OutlineDecision:
     (``len(candidates)``: the flip of the best one); ``turned_deg``: angle between the two;
     ``vote``: the left image's vote for ``best`` against its exact flip (against ``other`` when no flip
     was given; :mod:`spacepose.image_vote`), ``None`` when it was not taken (no image, the stage's
-    ``image_vote`` off, or neither a flip nor a rival)."""
+    ``image_vote`` off, or neither a flip nor a rival). ``frame``, ``observed``: the silhouette frame
+    and the observed (n, n) outline the candidates were refined against (for :func:`polish_pose`)."""
 
     best: OutlineFit
     other: OutlineFit
@@ -374,6 +393,8 @@ class OutlineDecision:
     margin_px: float
     turned_deg: float
     vote: ImageVote | None = None
+    frame: SilhouetteFrame | None = None
+    observed: np.ndarray | None = None
 
     def decided(self, config: SilhouetteConfig) -> bool:
         """Whether the outline picks ``best``: a fine enough fit and a clear enough gap, or (with
@@ -466,4 +487,26 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
     return OutlineDecision(best=best, other=other, best_index=min(order[0], len(candidates)),
                            margin_px=float(margin) if math.isfinite(margin) else 0.0,
                            turned_deg=float(rotation_angle_deg(best.R, other.R)) if rivals else float("nan"),
-                           vote=vote)
+                           vote=vote, frame=frame, observed=observed)
+
+
+def polish_pose(decision: OutlineDecision, R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray,
+                config: SilhouetteConfig, *, stereo_points: np.ndarray | None = None,
+                surface: SurfaceModel | None = None, tau_m: float = 0.5) -> OutlineFit | None:
+    """The decided pose (R, t) refined once more against ``decision``'s observed outline, with
+    ``config.polish_range_weight`` as the range weight (class docstring of :class:`SilhouetteConfig`).
+
+    ``None`` when the decision kept no outline, or the polish is not finite or moves the pose more
+    than ``polish_max_deg`` / ``polish_max_m``: report the decided pose then.
+    """
+    if decision.frame is None or decision.observed is None:
+        return None
+    fit = refine_outline(R, t, silhouette_points, decision.observed, decision.frame,
+                         dataclasses.replace(config, range_weight=config.polish_range_weight),
+                         stereo_points=stereo_points, surface=surface, tau_m=tau_m)
+    if not (np.all(np.isfinite(fit.R)) and np.all(np.isfinite(fit.t))):
+        return None
+    if (float(rotation_angle_deg(R, fit.R)) > config.polish_max_deg
+            or float(np.linalg.norm(fit.t - np.asarray(t))) > config.polish_max_m):
+        return None
+    return fit

@@ -1,5 +1,6 @@
 """Tests of spacepose.silhouette: the frame, the splat, the observed mask, outline refinement, the decision."""
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -15,8 +16,9 @@ from spacepose.bundle import load_bundle  # noqa: E402
 from spacepose.errors import BundleError, ShapeError  # noqa: E402
 from spacepose.flip import flipped_pose  # noqa: E402
 from spacepose.registration import SurfaceModel, rotation_angle_deg  # noqa: E402
-from spacepose.silhouette import (SilhouetteConfig, chamfer_px, contour, decide_outline, observed_mask,  # noqa: E402
-                                  refine_outline, silhouette_frame, splat_mask)
+from spacepose.silhouette import (OutlineDecision, SilhouetteConfig, chamfer_px, contour,  # noqa: E402
+                                  decide_outline, observed_mask, polish_pose, refine_outline, silhouette_frame,
+                                  splat_mask)
 
 K = np.array([[800.0, 0, 319.5], [0, 800.0, 239.5], [0, 0, 1]])
 CENTRE = np.zeros(3)
@@ -177,6 +179,36 @@ def test_range_weight_keeps_a_fattened_outline_from_pulling_the_pose_near(plate)
         SilhouetteConfig(range_weight=1.5)
 
 
+def test_the_polish_refines_the_decided_pose_with_its_own_range_weight(plate):
+    """An outline a little large pulls the range near. The decision (range_weight 0) keeps the stereo
+    points' range; the polish is one more refinement against the same outline with
+    ``polish_range_weight``, and a polish that would move the pose too far is not used."""
+    pts, nrm = plate
+    R, t = _pose()
+    disp = _disparity_of(pts, R, t)
+    fat = cv2.dilate((disp > 0).astype(np.uint8), np.ones((3, 3), np.uint8), iterations=1) > 0
+    disp = np.where(fat, disp.max(), 0.0).astype(np.float32)
+    cam = pts @ R.T + t
+    stereo = cam[np.einsum("ij,ij->i", nrm @ R.T, cam) < 0][::10]
+    kwargs = dict(stereo_points=stereo, surface=SurfaceModel(pts, nrm), tau_m=0.2)
+    config = SilhouetteConfig(max_side_px=320, range_weight=0.0, polish=1)
+    dec = decide_outline([(R, t)], pts, disp, K, 1.0, (160, 80, 320), config,
+                         flip=lambda R_, t_: flipped_pose(R_, t_, CENTRE, "z"), **kwargs)
+    assert abs(dec.best.t[2] - t[2]) < 0.05                            # the stereo points' range
+    assert dec.frame is not None and dec.observed.shape == (dec.frame.size, dec.frame.size)
+    polished = {w: polish_pose(dec, dec.best.R, dec.best.t, pts, dataclasses.replace(config, polish_range_weight=w),
+                               **kwargs) for w in (0.0, 1.0)}
+    assert polished[1.0].t[2] < t[2] - 0.3 < polished[0.0].t[2]       # the fat outline's pull, at full weight only
+    same = refine_outline(dec.best.R, dec.best.t, pts, dec.observed, dec.frame,
+                          dataclasses.replace(config, range_weight=1.0), **kwargs)
+    np.testing.assert_array_equal(polished[1.0].t, same.t)
+    assert rotation_angle_deg(polished[1.0].R, R) < 5.0
+    assert polish_pose(dec, dec.best.R, dec.best.t, pts, dataclasses.replace(config, polish_max_m=1e-3),
+                       **kwargs) is None                                # moved too far: not used
+    bare = OutlineDecision(best=dec.best, other=dec.other, best_index=0, margin_px=0.0, turned_deg=float("nan"))
+    assert polish_pose(bare, dec.best.R, dec.best.t, pts, config, **kwargs) is None
+
+
 def test_the_outline_tells_the_pose_from_its_flip(plate):
     pts, nrm = plate
     R, t = _pose()
@@ -223,7 +255,8 @@ def test_an_empty_outline_decides_nothing(plate):
 
 def test_config_refuses_nonsense():
     for bad in ({"max_side_px": 4}, {"trunc_px": 0.0}, {"contour_points": 3}, {"iterations": -1},
-                {"sigma_px": -1.0}):
+                {"sigma_px": -1.0}, {"polish": 2}, {"polish_range_weight": 1.5}, {"polish_max_deg": 0.0},
+                {"polish_max_m": -1.0}):
         with pytest.raises(ValueError):
             SilhouetteConfig(**bad)
 
@@ -245,6 +278,10 @@ def test_bundle_silhouette_section(tmp_path):
     voting = load_bundle(make_bundle(tmp_path / "v", _outline_manifest(image_vote=1, range_weight=0, image_veto_score=0,
                                                                      image_min_pixels=16)))
     assert voting.silhouette == SilhouetteConfig(image_vote=1, range_weight=0.0, image_veto_score=0.0, image_min_pixels=16)
+    polished = load_bundle(make_bundle(tmp_path / "pp", _outline_manifest(polish=1, polish_range_weight=0)))
+    assert polished.silhouette == SilhouetteConfig(polish=1, polish_range_weight=0.0)
+    off = load_bundle(make_bundle(tmp_path / "po", _outline_manifest(polish=0)))
+    assert off.silhouette.polish == 0
     plain = load_bundle(make_bundle(tmp_path / "plain"))
     assert plain.silhouette is None and plain.silhouette_points.shape == (0, 3)
 
@@ -255,6 +292,8 @@ def test_bundle_silhouette_section(tmp_path):
     (lambda d: d["silhouette"].update(iterations=1.5), "iterations"),
     (lambda d: d["silhouette"].update(image_veto_score=0.5), "image_veto_score"),
     (lambda d: d["silhouette"].update(range_weight=2), "invalid silhouette config"),
+    (lambda d: d["silhouette"].update(polish=2), "invalid silhouette config"),
+    (lambda d: d["silhouette"].update(polish_max_deg=0), "polish_max_deg"),
     (lambda d: d["target"].update(silhouette_points=[[0, 0, 0]] * 10), "at least 100"),
     (lambda d: d.pop("registration"), "registration"),
     (lambda d: d.update(silhouette=[1, 2]), "must be an object"),
@@ -329,6 +368,29 @@ def test_the_estimator_decides_by_the_outline(tmp_path):
     res = strict.estimate(left, right)
     assert not res.valid and res.status == "weak_votes" and "the outline does not decide" in res.detail
     assert np.isfinite(res.outline_margin_px) and res.outline_margin_px < 5.0
+
+
+def test_the_estimator_reports_the_polished_pose_when_asked(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+
+    left, right = synthetic_pair()
+    gates = {"max_chamfer_px": 100.0, "min_margin_px": 0.0}
+    plain = _estimator(tmp_path / "p", {"min_margin": 0.99}, gates).estimate(left, right)
+    assert plain.valid and np.isnan(plain.polish_deg) and np.isnan(plain.polish_m)
+    calls = []
+    real = estimator_module.polish_pose
+
+    def spy(decision, R, t, *args, **kwargs):
+        calls.append((np.array(R), np.array(t)))
+        return real(decision, R, t, *args, **kwargs)
+
+    monkeypatch.setattr(estimator_module, "polish_pose", spy)
+    res = _estimator(tmp_path / "q", {"min_margin": 0.99}, dict(gates, polish=1)).estimate(left, right)
+    assert res.valid and len(calls) == 1
+    np.testing.assert_allclose(calls[0][0], plain.R, atol=1e-12)        # it starts from the decided pose
+    assert np.isfinite(res.polish_deg) and res.polish_deg < 15.0 and res.polish_m < 1.0
+    assert rotation_angle_deg(res.R, calls[0][0]) == pytest.approx(res.polish_deg, abs=1e-9)
 
 
 def test_the_estimator_refuses_a_pose_the_outline_and_the_points_disagree_on(tmp_path, monkeypatch):
