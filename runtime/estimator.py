@@ -102,6 +102,8 @@ class PoseResult:
         polish_deg, polish_m: how far the silhouette stage's polish (``polish`` of the bundle's
             ``silhouette`` section, :func:`spacepose.silhouette.polish_pose`) moved the decided pose; NaN
             when it did not run or was not used. Not part of the JSON line.
+        decided: ``(R, t)`` before the polish, when it moved the pose (the next frame's tracking
+            compares with it: the tracking gates were set on unpolished poses); ``None`` otherwise.
     """
 
     R: np.ndarray
@@ -125,6 +127,7 @@ class PoseResult:
     outline_image_pixels: float = float("nan")
     polish_deg: float = float("nan")
     polish_m: float = float("nan")
+    decided: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -389,7 +392,8 @@ class PoseEstimator:
                             outline_image_score=factor("outline_image_score"),
                             outline_image_background=factor("outline_image_background"),
                             outline_image_pixels=factor("outline_image_pixels"),
-                            polish_deg=factor("polish_deg"), polish_m=factor("polish_m"))
+                            polish_deg=factor("polish_deg"), polish_m=factor("polish_m"),
+                            decided=stage.decided if valid else None)
         if status != "bad_input":  # a bad frame says nothing about where the target is
             with self._lock:
                 self._prior = result
@@ -545,6 +549,7 @@ class PoseEstimator:
             # wrong and nothing says which; report neither, and the next frame starts without a prior
             return _stage_invalid(stage, "weak_votes", factors), (
                 f"the pose is {turned:.0f}° from the previous frame's valid pose")
+        decided = None
         if outline is not None and sil.polish:
             with timer.stage("silhouette"):
                 polished = polish_pose(outline, R, t, self._outline_points, sil, stereo_points=xyz,
@@ -552,12 +557,12 @@ class PoseEstimator:
             if polished is not None:
                 factors.update(polish_deg=float(rotation_angle_deg(R, polished.R)),
                                polish_m=float(np.linalg.norm(polished.t - np.asarray(t))))
-                R, t = polished.R, polished.t
+                decided, (R, t) = (R, t), (polished.R, polished.t)
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),
                                    bandwidth=bandwidth, n_inliers=n_inliers, factors={**stage.factors, **factors},
-                                   fallback=fallback), ""
+                                   fallback=fallback, decided=decided), ""
 
     def _verify(self, stage: PoseStageResult, xyz: np.ndarray, left_r: np.ndarray, right_r: np.ndarray,
                 timer: StageTimer, fitness: float | None) -> tuple[str, str] | None:
@@ -611,7 +616,8 @@ class PoseEstimator:
             prior = self._prior
         if prior is None or not prior.valid:
             return None
-        return np.asarray(prior.R), np.asarray(prior.t)
+        R, t = prior.decided if prior.decided is not None else (prior.R, prior.t)
+        return np.asarray(R), np.asarray(t)
 
     def _pose_from_pair(self, left_r: np.ndarray, right_r: np.ndarray, hint, timer: StageTimer
                         ) -> tuple[str, PoseStageResult | None, roi.Window | None, str]:
@@ -679,7 +685,7 @@ class PoseEstimator:
         if problem is not None and stage.fallback is not None:
             # a tracked pose refined against the outline that the other checks refuse: the unrefined one
             logger.info("outline-refined tracked pose rejected (%s); trying the registered one", problem[1])
-            stage = dataclasses.replace(stage, R=stage.fallback[0], t=stage.fallback[1], fallback=None)
+            stage = dataclasses.replace(stage, R=stage.fallback[0], t=stage.fallback[1], fallback=None, decided=None)
             problem = self._verify(stage, xyz, left_r, right_r, timer, None)
         if problem is not None:
             return problem[0], None, stereo.window, problem[1]

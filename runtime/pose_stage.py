@@ -83,6 +83,8 @@ class PoseStageResult:
             adds ``flip_margin`` when its flip stage ran (:mod:`spacepose.flip`), not a factor.
         fallback: ``(R, t)`` to report instead when the estimator's checks refuse ``R, t`` (a tracked
             pose refined against the outline falls back to the registered one), else ``None``.
+        decided: ``(R, t)`` as decided, before the silhouette stage's polish moved it (the pose the
+            next frame's tracking compares with, as its gates were set on), else ``None`` (``R, t``).
     """
 
     R: np.ndarray
@@ -99,6 +101,7 @@ class PoseStageResult:
     bandwidth: float = float("nan")
     factors: dict[str, float] = field(default_factory=dict)
     fallback: tuple[np.ndarray, np.ndarray] | None = None
+    decided: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def depth_sigma(depth_m: float, focal_px: float, baseline_m: float, sigma_d_px: float) -> float:

@@ -391,6 +391,8 @@ def test_the_estimator_reports_the_polished_pose_when_asked(tmp_path, monkeypatc
     np.testing.assert_allclose(calls[0][0], plain.R, atol=1e-12)        # it starts from the decided pose
     assert np.isfinite(res.polish_deg) and res.polish_deg < 15.0 and res.polish_m < 1.0
     assert rotation_angle_deg(res.R, calls[0][0]) == pytest.approx(res.polish_deg, abs=1e-9)
+    np.testing.assert_array_equal(res.decided[0], calls[0][0])   # the next frame tracks from the decided pose
+    assert plain.decided is None
 
 
 def test_the_estimator_refuses_a_pose_the_outline_and_the_points_disagree_on(tmp_path, monkeypatch):
