@@ -456,6 +456,10 @@ class PoseEstimator:
            exactly one of them is near, it is reported, with the registered candidate near the
            previous pose (if any) to fall back to when the checks after refuse it.
 
+        With the stage's ``polish``, the pose so decided is refined once more against the outline
+        (:func:`spacepose.silhouette.polish_pose`) and reported; the next frame tracks from the pose as
+        decided (``PoseResult.decided``).
+
         Otherwise the frame is ``weak_votes``. A pose decided by 1 or 2 that is more than 90° from
         the previous frame's valid pose is reported ``weak_votes`` too (one of the two is a flip,
         and the frame alone cannot say which), which also clears the prior. Frames that are not a
