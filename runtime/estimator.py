@@ -456,16 +456,16 @@ class PoseEstimator:
            exactly one of them is near, it is reported, with the registered candidate near the
            previous pose (if any) to fall back to when the checks after refuse it.
 
-        With the stage's ``polish``, the pose so decided is refined once more against the outline
-        (:func:`spacepose.silhouette.polish_pose`) and reported; the next frame tracks from the pose as
-        decided (``PoseResult.decided``).
-
         Otherwise the frame is ``weak_votes``. A pose decided by 1 or 2 that is more than 90° from
         the previous frame's valid pose is reported ``weak_votes`` too (one of the two is a flip,
         and the frame alone cannot say which), which also clears the prior. Frames that are not a
         sequence lose little: a previous frame is rarely valid, and an unrelated previous pose lies
         within the tracking gates of one of the two candidates only by rare chance (both 20° and 1 m
         by default).
+
+        With the stage's ``polish``, the pose so decided is refined once more against the outline
+        (:func:`spacepose.silhouette.polish_pose`) and reported; the next frame tracks from the pose as
+        decided (``PoseResult.decided``).
         """
         config, bundle = self.bundle.registration, self.bundle
         axis = bundle.voting.flip_axis
