@@ -251,18 +251,6 @@ class SurfaceModel:
                 dist[far] = dist_c
         return pts, nrm, np.where(dist <= reach_m, dist, np.inf)
 
-    def distance(self, X: np.ndarray, reach_m: float) -> np.ndarray:
-        """The distance part of :meth:`query` alone (no normals gathered)."""
-        if reach_m > 2.0 * self.fine.reach:
-            _, dist = self.coarse.query(X)
-            return np.where(dist <= reach_m, dist, np.inf)
-        idx, dist = self.fine.query(X)
-        if reach_m > self.fine.reach:
-            far = idx < 0
-            if far.any():
-                dist[far] = self.coarse.query(X[far])[1]
-        return np.where(dist <= reach_m, dist, np.inf)
-
 
 @dataclass(frozen=True, eq=False)
 class RegistrationResult:
@@ -388,7 +376,7 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
     else:
         runner, runner_angle, R_run, t_run = float("inf"), 0.0, np.full((3, 3), np.nan), np.full(3, np.nan)
     X = (P - t[best]) @ R[best]
-    dist = model.distance(X, tau)
+    _, _, dist = model.query(X, tau)
     return RegistrationResult(R=R[best], t=t[best], score=float(score[best]), runner_up_score=runner,
                               runner_up_angle_deg=runner_angle, runner_up_R=R_run, runner_up_t=t_run,
                               inlier_fraction=float(np.mean(dist < tau)), tau_m=float(tau), starts=len(R0),
@@ -417,5 +405,5 @@ def near_prior(R: np.ndarray, t: np.ndarray, R_prior: np.ndarray, t_prior: np.nd
 
 def _scene_cost(R: np.ndarray, t: np.ndarray, P: np.ndarray, model: SurfaceModel, tau: float) -> np.ndarray:
     X = (P[None] - t[:, None, :]) @ R
-    dist = model.distance(X, tau)
+    _, _, dist = model.query(X, tau)
     return np.mean(np.minimum(dist, tau) ** 2, axis=1) / tau ** 2

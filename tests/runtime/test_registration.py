@@ -112,14 +112,6 @@ def test_surface_lookup_gathers_the_sample_and_its_normal():
     assert (idx < 0).any() and (idx >= 0).any()
 
 
-@pytest.mark.parametrize("reach", [0.1, 0.3, 0.5, 2.0])   # fine grid alone, fine + coarse, coarse alone
-def test_surface_model_distance_is_the_distance_query_gives(reach):
-    pts, nrm = _asymmetric_target()
-    model = SurfaceModel(pts, nrm)
-    q = np.random.default_rng(2).uniform(-3, 3, (3, 500, 3))
-    np.testing.assert_array_equal(model.distance(q, reach), model.query(q, reach)[2])
-
-
 def test_cross_into_is_bit_equal_to_numpy_cross():
     rng = np.random.default_rng(3)
     a, b = rng.normal(size=(4, 50, 3)) * 1e3, rng.normal(size=(4, 50, 3))
