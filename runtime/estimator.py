@@ -51,6 +51,7 @@ from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
+from .outline_search import OutlineTemplates
 from .silhouette import decide_outline, polish_pose
 
 __all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
@@ -307,6 +308,11 @@ class PoseEstimator:
                               if self.bundle.registration is not None else None)
         self._outline_points = (np.ascontiguousarray(self.bundle.silhouette_points, dtype=np.float32)
                                 if self.bundle.silhouette is not None and self._registration is not None else None)
+        sil = self.bundle.silhouette
+        self._outline_templates = (
+            OutlineTemplates(self._outline_points, np.asarray(self.bundle.centre), float(self.bundle.radius),
+                             views=sil.search_views, grid=sil.search_grid)
+            if self._outline_points is not None and sil.search_candidates > 0 else None)
         self._lock = threading.Lock()
         self._prior: PoseResult | None = None
 
@@ -610,7 +616,8 @@ class PoseEstimator:
         w = stereo.window
         return decide_outline(candidates, self._outline_points, stereo.disparity, self.K, self.baseline_m,
                               (w.x0, w.y0, w.side), bundle.silhouette, stereo_points=xyz,
-                              surface=self._registration, tau_m=reg.tau_m, flip=flip, image=left_r)
+                              surface=self._registration, tau_m=reg.tau_m, flip=flip, image=left_r,
+                              templates=self._outline_templates)
 
     def _valid_prior(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The previous frame's pose when it was valid and ``use_prior`` is on, else ``None``."""

@@ -27,7 +27,7 @@ the range it implies is biased near, and at 0 the range is the stereo points' al
 *Decision* (:func:`decide_outline`): the symmetric chamfer distance of the refined outline to the
 observed one for every candidate, and for the flip of the best one, refined in turn (a candidate
 too far off to converge can leave its flip the better fit; the flip of that precise wrong pose is
-a precise right one). The lowest wins; the margin is the gap to the best pose more than 90° from
+a precise right one). The lowest wins; the margin is the gap to the best pose more than ``rival_deg`` (90°) from
 it. Both are measured in
 *outline pixels*: pixels of a ``max_side_px`` view of the stereo window, whatever its size. The
 window is a fixed multiple of the target's extent, so an outline pixel is a fixed fraction of the
@@ -54,6 +54,7 @@ import numpy as np
 
 from .errors import check_shape
 from .image_vote import ImageVote, crop_to_frame, image_vote, window_grey
+from .outline_search import OutlineTemplates, search_outline
 from .registration import SurfaceModel, cross_into, exp_so3, rotation_angle_deg
 
 __all__ = ["SilhouetteConfig", "SilhouetteFrame", "OutlineFit", "OutlineDecision", "silhouette_frame",
@@ -104,6 +105,18 @@ class SilhouetteConfig:
     polish_max_deg, polish_max_m: a polish that moves the pose farther than either is not used (the
         decided pose is reported): it refines, it must not turn the pose into another one.
     image_exclusion_px: band (frame px) around each outline left out of the vote.
+    points_weight: the decision ranks the refined fits by ``chamfer_px + points_weight * points_res``
+        (:class:`OutlineFit`; the margin is the gap in that score): the stereo points weigh in where
+        two outlines fit alike. 0 (the default, and every bundle without the key): the chamfer alone.
+    rival_deg: the margin is measured against the best fit more than this far from the winner: 90
+        (the default) compares with the flip and other far poses; with the outline search, poses 30-60°
+        apart can fit alike too, and a smaller angle makes the margin count them.
+    search_candidates: with :class:`spacepose.outline_search.OutlineTemplates` given to
+        :func:`decide_outline`, this many more candidates from a global search of the outline
+        (:mod:`spacepose.outline_search`; those within ``search_separation_deg`` of a given candidate or
+        of each other are dropped). 0 (the default, and every bundle without the key) searches nothing.
+        search_views, search_grid: the templates' view directions and grid side; search_angles: turns
+        of the observed outline about the line of sight.
     stop_rad, stop_m: a step smaller than both (rotation, translation) ends the refinement.
     depth_margin_m: the observed mask keeps pixels nearer than ``distance + depth_margin_m``.
     max_chamfer_px: the winner's chamfer distance (outline px, module docstring) above which its outline does not
@@ -135,6 +148,13 @@ class SilhouetteConfig:
     polish_range_weight: float = 0.25
     polish_max_deg: float = 15.0
     polish_max_m: float = 1.0
+    points_weight: float = 0.0
+    rival_deg: float = 90.0
+    search_candidates: int = 0
+    search_views: int = 1000
+    search_angles: int = 36
+    search_grid: int = 32
+    search_separation_deg: float = 30.0
     stop_rad: float = 2e-4
     stop_m: float = 2e-3
     seed: int = 0
@@ -152,6 +172,11 @@ class SilhouetteConfig:
             raise ValueError(f"invalid silhouette config {self}")
         if (self.polish not in (0, 1) or not 0.0 <= self.polish_range_weight <= 1.0
                 or not self.polish_max_deg > 0 or not self.polish_max_m > 0):
+            raise ValueError(f"invalid silhouette config {self}")
+        if not (self.points_weight >= 0 and 0 < self.rival_deg < 180):
+            raise ValueError(f"invalid silhouette config {self}")
+        if (self.search_candidates < 0 or self.search_views < 1 or self.search_angles < 1 or self.search_grid < 8
+                or not 0.0 <= self.search_separation_deg <= 180.0):
             raise ValueError(f"invalid silhouette config {self}")
         if not -1.0 <= self.image_veto_score < self.image_min_score:
             raise ValueError(f"invalid silhouette config {self}: image_veto_score must be in [-1, image_min_score)")
@@ -264,11 +289,18 @@ def chamfer_px(mask: np.ndarray, observed: np.ndarray, cap_px: float, scale: flo
 
 @dataclass(frozen=True, eq=False)
 class OutlineFit:
-    """A pose refined against the outline: ``R``, ``t``, its ``chamfer_px`` (outline px, module docstring)."""
+    """A pose refined against the outline: ``R``, ``t``, its ``chamfer_px`` (outline px, module docstring)
+    and ``points_res``, the stereo points' mean point-to-plane distance to the surface at the pose in
+    units of the noise ``tau``, each capped at 3 (0 when not measured: ``points_weight`` 0)."""
 
     R: np.ndarray
     t: np.ndarray
     chamfer_px: float
+    points_res: float = 0.0
+
+    def score(self, config: SilhouetteConfig) -> float:
+        """What the decision ranks the fits by: ``chamfer_px + points_weight * points_res``."""
+        return self.chamfer_px + config.points_weight * self.points_res
 
 
 def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, observed: np.ndarray,
@@ -374,14 +406,24 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
             if np.linalg.norm(step[:3]) < config.stop_rad and np.linalg.norm(step[3:]) < config.stop_m:
                 break
     mask, _, _ = splat_mask(silhouette_points, R, t, frame)
-    return OutlineFit(R=R, t=t, chamfer_px=chamfer_px(mask, observed, config.trunc_px, _outline_unit(frame, config)))
+    points_res = 0.0
+    if config.points_weight > 0 and P is not None:
+        Xo = (P - t) @ R                                                     # R^T (P - t)
+        q, nrm, d = surface.query(Xo, 3.0 * tau_m)
+        ok = np.isfinite(d)
+        e = np.full(len(P), 3.0)
+        e[ok] = np.minimum(np.abs(np.einsum("ij,ij->i", nrm[ok], Xo[ok] - q[ok])) / tau_m, 3.0)
+        points_res = float(e.mean())
+    return OutlineFit(R=R, t=t, chamfer_px=chamfer_px(mask, observed, config.trunc_px, _outline_unit(frame, config)),
+                      points_res=points_res)
 
 
 @dataclass(frozen=True, eq=False)
 class OutlineDecision:
-    """Candidates refined: ``best`` (lowest chamfer), ``other`` (the best more than 90° from it, NaN
-    pose when none), ``margin_px`` between them; ``best_index``: which input candidate won
-    (``len(candidates)``: the flip of the best one); ``turned_deg``: angle between the two;
+    """Candidates refined: ``best`` (lowest chamfer), ``other`` (the best more than ``rival_deg`` from it, NaN
+    pose when none), ``margin_px`` between them (in :meth:`OutlineFit.score`, the chamfer
+    unless ``points_weight`` is set); ``best_index``: which candidate won (the
+    given ones, then the outline search's; their count: the flip of the best one); ``turned_deg``: angle between the two;
     ``vote``: the left image's vote for ``best`` against its exact flip (against ``other`` when no flip
     was given; :mod:`spacepose.image_vote`), ``None`` when it was not taken (no image, the stage's
     ``image_vote`` off, or neither a flip nor a rival). ``frame``, ``observed``: the silhouette frame
@@ -435,7 +477,7 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
                    config: SilhouetteConfig = SilhouetteConfig(), *, stereo_points: np.ndarray | None = None,
                    surface: SurfaceModel | None = None, tau_m: float = 0.5,
                    flip: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
-                   image: np.ndarray | None = None) -> OutlineDecision:
+                   image: np.ndarray | None = None, templates: OutlineTemplates | None = None) -> OutlineDecision:
     """Refine candidate poses against the outline the ``disparity`` (H, W) shows in ``window``
     (full-frame ``x0, y0, side``) and say which fits it best (module docstring).
 
@@ -443,11 +485,15 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
     refined too. A candidate too far from the truth for the refinement to reach it can leave its
     flip the better fit; the flip of that precise wrong pose is a precise right one, and the
     comparison is then between two converged poses. The margin is measured against the best pose
-    more than 90° from the winner (``cap`` when there is none).
+    more than ``rival_deg`` from the winner (``cap`` when there is none).
 
     ``image``: the left rectified image (H, W[, C], the disparity's pixels). With ``config.image_vote``
     its lit pixels vote between the winner's outline and that of the winner's exact ``flip`` (the
     best rival's without ``flip``; :mod:`spacepose.image_vote`).
+
+    ``templates``: with ``config.search_candidates`` > 0, the outline is also searched globally
+    (:func:`spacepose.outline_search.search_outline`) and up to that many of its poses, none within
+    ``search_separation_deg`` of a given candidate, are refined after the given ones.
     """
     if not candidates:
         raise ValueError("decide_outline needs at least one candidate")
@@ -462,17 +508,25 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
         return refine_outline(R, t, silhouette_points, observed, frame, config, stereo_points=stereo_points,
                               surface=surface, tau_m=tau_m)
 
+    candidates = list(candidates)
+    if templates is not None and config.search_candidates > 0:
+        found = search_outline(templates, observed, frame.K, distance, angles=config.search_angles,
+                               candidates=config.search_candidates + len(candidates),
+                               min_separation_deg=config.search_separation_deg)
+        given = [R for R, _ in candidates]
+        found = [c for c in found if all(rotation_angle_deg(R, c.R) >= config.search_separation_deg for R in given)]
+        candidates += [(c.R, c.t) for c in found[: config.search_candidates]]
     fits = [fit(R, t) for R, t in candidates]
     if flip is not None:
-        best = min(fits, key=lambda f: f.chamfer_px)
+        best = min(fits, key=lambda f: f.score(config))
         fits.append(fit(*flip(best.R, best.t)))
-    order = sorted(range(len(fits)), key=lambda i: fits[i].chamfer_px)
+    order = sorted(range(len(fits)), key=lambda i: fits[i].score(config))
     best = fits[order[0]]
     turned = [float(rotation_angle_deg(best.R, fits[i].R)) for i in order[1:]]
-    rivals = [i for i, a in zip(order[1:], turned) if a > 90.0]
+    rivals = [i for i, a in zip(order[1:], turned) if a > config.rival_deg]
     cap = config.trunc_px / _outline_unit(frame, config)
     other = fits[rivals[0]] if rivals else OutlineFit(R=np.full((3, 3), np.nan), t=np.full(3, np.nan), chamfer_px=cap)
-    margin = other.chamfer_px - best.chamfer_px
+    margin = other.score(config) - best.score(config)
     vote = None
     if config.image_vote and image is not None and (rivals or flip is not None):
         # against the exact flip of the winner where there is one: its symmetric parts coincide with the

@@ -243,6 +243,40 @@ def test_the_flip_of_the_best_fit_rescues_a_candidate_too_far_to_converge(plate)
         decide_outline([], pts, disp, K, 1.0, (160, 80, 320), config)
 
 
+def test_the_points_weight_decides_where_two_outlines_fit_alike():
+    """A plate with a block on its front face, seen face-on: turned over about x, its outline is the
+    same rectangle, and the chamfer cannot choose; the stereo points (the block comes towards the
+    camera) can, with ``points_weight``."""
+    rng = np.random.default_rng(5)
+    plate_p, plate_n = _slab((-2, -1, -0.1), (2, 1, 0.1), 2000, rng)
+    block_p, block_n = _slab((-0.5, -0.5, -1.1), (0.5, 0.5, -0.1), 2000, rng)
+    pts, nrm = np.vstack([plate_p, block_p]), np.vstack([plate_n, block_n])
+    R, t = np.eye(3), np.array([0.2, -0.1, 20.0])                    # face-on, the block (-z) towards the camera
+    over = Rotation.from_euler("x", 180, degrees=True).as_matrix()
+    turned = (R @ over, t)                                             # the block behind, the same outline
+    disp = _disparity_of(pts, R, t)
+    cam = pts @ R.T + t
+    visible = np.einsum("ij,ij->i", nrm @ R.T, cam) < 0
+    stereo = cam[visible & ((np.abs(pts[:, 0]) > 0.55) | (np.abs(pts[:, 1]) > 0.55) | (pts[:, 2] < -1.0))][::4]
+    kwargs = dict(stereo_points=stereo, surface=SurfaceModel(pts, nrm), tau_m=0.2)
+    window = (160, 80, 320)
+    config = SilhouetteConfig(iterations=4, points_weight=2.0)
+    fits = {name: refine_outline(*pose, pts, observed_mask(disp, silhouette_frame(K, *window, 192), 10.0),
+                                 silhouette_frame(K, *window, 192), config, **kwargs)
+            for name, pose in (("true", (R, t)), ("turned", turned))}
+    assert abs(fits["true"].chamfer_px - fits["turned"].chamfer_px) < 0.3          # the outline cannot tell
+    assert 0.0 <= fits["true"].points_res < 0.15 < 0.3 < fits["turned"].points_res <= 3.0   # the block: 1/8 of the face
+    assert fits["turned"].score(config) == pytest.approx(fits["turned"].chamfer_px + 2.0 * fits["turned"].points_res)
+    for order in ([(R, t), turned], [turned, (R, t)]):
+        dec = decide_outline(order, pts, disp, K, 1.0, window, config, **kwargs)
+        assert rotation_angle_deg(dec.best.R, R) < 3.0 and dec.margin_px > 0.5
+    # unweighted, the points are not measured and the margin is the chamfer's alone
+    plain = decide_outline([(R, t), turned], pts, disp, K, 1.0, window, SilhouetteConfig(iterations=4), **kwargs)
+    assert plain.best.points_res == 0.0 and plain.margin_px < 0.3
+    with pytest.raises(ValueError):
+        SilhouetteConfig(points_weight=-1.0)
+
+
 def test_an_empty_outline_decides_nothing(plate):
     pts, _ = plate
     R, t = _pose()
@@ -282,6 +316,10 @@ def test_bundle_silhouette_section(tmp_path):
     assert polished.silhouette == SilhouetteConfig(polish=1, polish_range_weight=0.0)
     off = load_bundle(make_bundle(tmp_path / "po", _outline_manifest(polish=0)))
     assert off.silhouette.polish == 0
+    searched = load_bundle(make_bundle(tmp_path / "se", _outline_manifest(search_candidates=3, points_weight=4,
+                                                                        search_separation_deg=0, rival_deg=30)))
+    assert searched.silhouette == SilhouetteConfig(search_candidates=3, points_weight=4.0, search_separation_deg=0.0,
+                                                   rival_deg=30.0)
     plain = load_bundle(make_bundle(tmp_path / "plain"))
     assert plain.silhouette is None and plain.silhouette_points.shape == (0, 3)
 
@@ -294,6 +332,9 @@ def test_bundle_silhouette_section(tmp_path):
     (lambda d: d["silhouette"].update(range_weight=2), "invalid silhouette config"),
     (lambda d: d["silhouette"].update(polish=2), "invalid silhouette config"),
     (lambda d: d["silhouette"].update(polish_max_deg=0), "polish_max_deg"),
+    (lambda d: d["silhouette"].update(points_weight=-1), "points_weight"),
+    (lambda d: d["silhouette"].update(search_candidates=-1), "search_candidates"),
+    (lambda d: d["silhouette"].update(search_grid=4), "invalid silhouette config"),
     (lambda d: d["target"].update(silhouette_points=[[0, 0, 0]] * 10), "at least 100"),
     (lambda d: d.pop("registration"), "registration"),
     (lambda d: d.update(silhouette=[1, 2]), "must be an object"),
@@ -368,6 +409,21 @@ def test_the_estimator_decides_by_the_outline(tmp_path):
     res = strict.estimate(left, right)
     assert not res.valid and res.status == "weak_votes" and "the outline does not decide" in res.detail
     assert np.isfinite(res.outline_margin_px) and res.outline_margin_px < 5.0
+
+
+def test_the_estimator_searches_the_outline_when_the_bundle_asks(tmp_path):
+    from _bundle_fixtures import synthetic_pair
+
+    left, right = synthetic_pair()
+    plain = _estimator(tmp_path / "p", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0})
+    assert plain._outline_templates is None
+    est = _estimator(tmp_path / "s", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0,
+                                                           "search_candidates": 2, "search_views": 200,
+                                                           "points_weight": 1.0})
+    assert est._outline_templates is not None and len(est._outline_templates.vectors) == 200
+    res = est.estimate(left, right)
+    assert res.valid and res.outline_chamfer_px < 2.0
+    assert abs(abs(res.R[2, 2]) - 1.0) < 0.05 and abs(res.t[2] - 9.0) < 0.5    # the plate, facing the camera
 
 
 def test_the_estimator_reports_the_polished_pose_when_asked(tmp_path, monkeypatch):
