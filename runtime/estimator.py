@@ -291,7 +291,7 @@ class PoseEstimator:
         self.seed = int(seed)
         self.stereo = StereoMatcher(self.bundle.stereo_path, threads=self.threads,
                                     margin=self.bundle.stereo.window_margin)
-        self.pose_session = make_session(self.bundle.pose_path, threads=self.threads)
+        self.pose_session = make_session(self.bundle.pose_path, threads=self.threads, mem_arena=True)  # fixed shapes: faster
         self._pose_outputs = [o.name for o in self.pose_session.get_outputs()]
         self._pose_inputs = [i.name for i in self.pose_session.get_inputs()]  # variants drop unused inputs
         for name in ("seg_logits", "kp_offsets", "ctr_offsets"):

@@ -51,8 +51,9 @@ def _worker(args: argparse.Namespace) -> None:
     if args.backend == "ort":
         from spacepose.onnx_session import make_session
 
-        # the session options of the flight runtime: the stereo stage lets its workers spin
-        session = make_session(args.onnx, threads=args.threads, spinning=args.graph == "stereo")
+        # the session options of the flight runtime: both keep onnxruntime's memory arena, the stereo
+        # stage lets its workers spin (spacepose.stereo_stage.StereoMatcher, spacepose.estimator)
+        session = make_session(args.onnx, threads=args.threads, spinning=args.graph == "stereo", mem_arena=True)
         outputs = [o.name for o in session.get_outputs()]
         result = time_calls(lambda f: session.run(outputs, f), feeds, args.repeats)
     else:

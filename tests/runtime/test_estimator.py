@@ -46,6 +46,9 @@ def test_end_to_end_valid_pose(estimator):
     record = res.to_dict("000001.png")
     assert record["frame"] == "000001.png" and record["valid"] is True
     assert set(record) >= {"frame", "valid", "status", "R", "t", "q_wxyz", "confidence", "timings_ms"}
+    # both graphs have fixed input sizes: their sessions keep onnxruntime's memory arena
+    assert estimator.stereo.session.get_session_options().enable_cpu_mem_arena
+    assert estimator.pose_session.get_session_options().enable_cpu_mem_arena
 
 
 def test_calib_from_file_and_grey_uint16(bundle, tmp_path):

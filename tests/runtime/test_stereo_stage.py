@@ -111,6 +111,12 @@ class TestMatcherOnnx:
         res = m.match(left, np.roll(left, -4, axis=1))
         assert res.disparity.shape == (96, 128) and np.all(np.isfinite(res.disparity))
         assert np.all(res.disparity >= 0)
+        # the memory arena is on by default (fixed input size: its blocks are reused), and results do
+        # not depend on it
+        assert m.session.get_session_options().enable_cpu_mem_arena
+        plain = StereoMatcher(tiny_stereo_graph, threads=1, mem_arena=False)
+        assert not plain.session.get_session_options().enable_cpu_mem_arena
+        np.testing.assert_array_equal(plain.match(left, np.roll(left, -4, axis=1)).disparity, res.disparity)
 
     def test_refuses_other_kind(self, tiny_stereo_graph, tmp_path):
         onnx = pytest.importorskip("onnx")
