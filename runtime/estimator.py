@@ -46,12 +46,12 @@ from . import roi
 from .bundle import ModelBundle, load_bundle
 from .errors import ShapeError
 from .flip import flipped_pose, resolve_flip
+from .outline_search import OutlineTemplates
 from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
-from .outline_search import OutlineTemplates
 from .silhouette import decide_outline, polish_pose
 
 __all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
@@ -291,7 +291,8 @@ class PoseEstimator:
         self.seed = int(seed)
         self.stereo = StereoMatcher(self.bundle.stereo_path, threads=self.threads,
                                     margin=self.bundle.stereo.window_margin)
-        self.pose_session = make_session(self.bundle.pose_path, threads=self.threads, mem_arena=True)  # fixed shapes: faster
+        # fixed input sizes: onnxruntime's memory arena reuses its blocks (see StereoMatcher's mem_arena)
+        self.pose_session = make_session(self.bundle.pose_path, threads=self.threads, mem_arena=True)
         self._pose_outputs = [o.name for o in self.pose_session.get_outputs()]
         self._pose_inputs = [i.name for i in self.pose_session.get_inputs()]  # variants drop unused inputs
         for name in ("seg_logits", "kp_offsets", "ctr_offsets"):

@@ -30,8 +30,8 @@ def make_session(path: str | os.PathLike, *, threads: int = 2, mem_arena: bool =
     Args:
         threads: intra-op threads (inter-op is 1: the graph runs sequentially).
         mem_arena: onnxruntime's CPU memory arena: faster for a graph of fixed input size called
-            again and again (the stereo stage turns it on: :class:`spacepose.stereo_stage.StereoMatcher`),
-            at the cost of the memory it keeps; off by default.
+            again and again (the estimator turns it on for both its graphs; see
+            :class:`spacepose.stereo_stage.StereoMatcher`), at the cost of the memory it keeps; off by default.
         optimize: full graph optimisations (``ORT_ENABLE_ALL``) when True, basic otherwise.
         spinning: let idle intra-op workers spin instead of sleeping (see the comment below).
 

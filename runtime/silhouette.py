@@ -27,8 +27,8 @@ the range it implies is biased near, and at 0 the range is the stereo points' al
 *Decision* (:func:`decide_outline`): the symmetric chamfer distance of the refined outline to the
 observed one for every candidate, and for the flip of the best one, refined in turn (a candidate
 too far off to converge can leave its flip the better fit; the flip of that precise wrong pose is
-a precise right one). The lowest wins; the margin is the gap to the best pose more than ``rival_deg`` (90°) from
-it. Both are measured in
+a precise right one). The lowest wins; the margin is the gap to the best pose more than
+``rival_deg`` (90°) from it. Both are measured in
 *outline pixels*: pixels of a ``max_side_px`` view of the stereo window, whatever its size. The
 window is a fixed multiple of the target's extent, so an outline pixel is a fixed fraction of the
 target: the parts the flip moves are as many outline pixels across at 10 m as at 50 m, at
@@ -420,10 +420,10 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
 
 @dataclass(frozen=True, eq=False)
 class OutlineDecision:
-    """Candidates refined: ``best`` (lowest chamfer), ``other`` (the best more than ``rival_deg`` from it, NaN
-    pose when none), ``margin_px`` between them (in :meth:`OutlineFit.score`, the chamfer
-    unless ``points_weight`` is set); ``best_index``: which candidate won (the
-    given ones, then the outline search's; their count: the flip of the best one); ``turned_deg``: angle between the two;
+    """Candidates refined: ``best`` (lowest :meth:`OutlineFit.score`, the chamfer unless ``points_weight``
+    is set), ``other`` (the best more than ``rival_deg`` from it, NaN pose when none), ``margin_px``
+    between their scores; ``best_index``: which candidate won (the given ones, then the outline
+    search's; their count: the flip of the best one); ``turned_deg``: angle between the two;
     ``vote``: the left image's vote for ``best`` against its exact flip (against ``other`` when no flip
     was given; :mod:`spacepose.image_vote`), ``None`` when it was not taken (no image, the stage's
     ``image_vote`` off, or neither a flip nor a rival). ``frame``, ``observed``: the silhouette frame

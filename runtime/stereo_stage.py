@@ -132,11 +132,11 @@ class StereoMatcher:
         margin: window side = margin * longest side of the target box ∪ its right-image copy.
         min_side: smallest window side in full-frame pixels.
         mem_arena: onnxruntime's CPU memory arena. On (the default since session 12): the graph's
-            fixed input size makes the arena's blocks reusable from call to call, and the shipped graph
-            runs about 1.5x faster with it (256x256, 4 iterations, alone in a process: 193 -> 131 ms
-            on one thread, 140 -> 85 ms on two) for about 45 MiB more peak RSS (223 -> 266 MiB); without
-            it onnxruntime allocates and frees every intermediate tensor on every call. See the model
-            card's latency section for the whole pipeline.
+            fixed input size makes the arena's blocks reusable from call to call; without it
+            onnxruntime allocates and frees every intermediate tensor on every call. Session 12,
+            ``spacepose profile`` at 1280x960 on 2 threads, the same frames: stereo stage p50 329 / 302
+            ms without, 186 / 204 ms with it, peak RSS 349 / 351 -> 388 / 394 MiB
+            (``reports/profile1280_s12_*.json``), results bit-identical.
         infinity_check: drop coarse-pass pixels that match better at zero disparity (:mod:`spacepose.infinity`).
         spinning: onnxruntime workers spin between the graph's operators instead of sleeping. The
             stereo graph has about 2,000 small nodes, and waking a sleeping worker for each costs more
