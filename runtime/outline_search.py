@@ -3,8 +3,10 @@
 The outline refinement (:mod:`spacepose.silhouette`) is local: started 20° or more from the truth,
 it settles in another pose, and registration to noisy far stereo points often starts it there. Yet
 the truth fits the outline better than what the refinement reaches on most such frames (session 12,
-train frames with the gates open: on 59 of 66 wrong poses and 51 of 74 flips, the refined true pose
-had the lower chamfer). So the outline is searched globally for more starts.
+400 train frames with the gates open: on 50 of 58 wrong poses and 68 of 94 flips the refined true pose
+had the lower chamfer; ``python -m spacepose.tools.outline_oracle``). So the outline is searched
+globally for more starts. (Measured on this target, the search also finds wrong poses that fit better
+than the truth; the shipped bundle does not enable it: see its model card.)
 
 *Templates* (:class:`OutlineTemplates`, built once from the bundle's silhouette samples): the
 target seen orthographically along ``views`` directions spread over the sphere, each a
