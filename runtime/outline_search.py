@@ -35,7 +35,7 @@ from .errors import check_shape
 from .registration import rotation_angle_deg
 
 __all__ = ["OutlineTemplates", "OutlineCandidate", "sphere_directions", "view_rotation", "ray_rotation",
-           "search_outline"]
+           "grid_homography", "search_outline"]
 
 
 def sphere_directions(n: int) -> np.ndarray:
