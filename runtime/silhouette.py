@@ -58,8 +58,8 @@ from .outline_search import OutlineTemplates, search_outline
 from .registration import SurfaceModel, cross_into, exp_so3, rotation_angle_deg
 
 __all__ = ["SilhouetteConfig", "SilhouetteFrame", "OutlineFit", "OutlineDecision", "silhouette_frame",
-           "splat_mask", "observed_mask", "contour", "chamfer_px", "refine_outline", "decide_outline",
-           "polish_pose"]
+           "splat_mask", "observed_mask", "contour", "chamfer_px", "points_residual", "refine_outline",
+           "decide_outline", "polish_pose"]
 
 _KERNEL = np.ones((3, 3), np.uint8)
 
@@ -303,6 +303,24 @@ class OutlineFit:
         return self.chamfer_px + config.points_weight * self.points_res
 
 
+def points_residual(R: np.ndarray, t: np.ndarray, points: np.ndarray, surface: SurfaceModel, tau_m: float,
+                    cap: float = 3.0) -> float:
+    """Mean point-to-plane distance of the finite camera-frame ``points`` (N, 3) to ``surface`` at pose
+    (R, t), in units of ``tau_m``, each capped at ``cap`` (a point with no surface within ``cap * tau_m``
+    counts ``cap``): :class:`OutlineFit` ``points_res``. NaN when no point is finite."""
+    check_shape(points, (None, 3), "points")
+    P = np.asarray(points, dtype=np.float64)
+    P = P[np.all(np.isfinite(P), axis=1)]
+    if len(P) == 0:
+        return float("nan")
+    Xo = (P - t) @ R                                                         # R^T (P - t)
+    q, nrm, d = surface.query(Xo, cap * tau_m)
+    ok = np.isfinite(d)
+    e = np.full(len(P), cap)
+    e[ok] = np.minimum(np.abs(np.einsum("ij,ij->i", nrm[ok], Xo[ok] - q[ok])) / tau_m, cap)
+    return float(e.mean())
+
+
 def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, observed: np.ndarray,
                    frame: SilhouetteFrame, config: SilhouetteConfig = SilhouetteConfig(), *,
                    stereo_points: np.ndarray | None = None, surface: SurfaceModel | None = None,
@@ -406,14 +424,7 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
             if np.linalg.norm(step[:3]) < config.stop_rad and np.linalg.norm(step[3:]) < config.stop_m:
                 break
     mask, _, _ = splat_mask(silhouette_points, R, t, frame)
-    points_res = 0.0
-    if config.points_weight > 0 and P is not None:
-        Xo = (P - t) @ R                                                     # R^T (P - t)
-        q, nrm, d = surface.query(Xo, 3.0 * tau_m)
-        ok = np.isfinite(d)
-        e = np.full(len(P), 3.0)
-        e[ok] = np.minimum(np.abs(np.einsum("ij,ij->i", nrm[ok], Xo[ok] - q[ok])) / tau_m, 3.0)
-        points_res = float(e.mean())
+    points_res = points_residual(R, t, P, surface, tau_m) if config.points_weight > 0 and P is not None else 0.0
     return OutlineFit(R=R, t=t, chamfer_px=chamfer_px(mask, observed, config.trunc_px, _outline_unit(frame, config)),
                       points_res=points_res)
 

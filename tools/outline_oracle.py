@@ -28,6 +28,8 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from spacepose.tools.eval_pose import FLIP_DEG
+
 __all__ = ["summarise", "collect", "main"]
 
 logger = logging.getLogger(__name__)
@@ -35,7 +37,7 @@ WEIGHTS = (0.0, 1.0, 2.0, 4.0)
 
 
 def _outcome(e_r: float, e_t: float, max_e_r: float, max_e_t: float) -> str:
-    if e_r > 90.0:
+    if e_r > FLIP_DEG:
         return "flip"
     return "right" if e_r <= max_e_r and e_t <= max_e_t else "wrong"
 
@@ -98,19 +100,13 @@ def _recording(store: list[tuple[Any, ...]]) -> Iterator[list[dict[str, Any]]]:
         est.decide_outline, sil.refine_outline = decide, refine
 
 
-def _points_res(fit: Any, P: np.ndarray | None, surface: Any, tau: float, cap: float = 3.0) -> float:
+def _points_res(fit: Any, P: np.ndarray | None, surface: Any, tau: float) -> float:
+    """:func:`spacepose.silhouette.points_residual` of ``fit``; NaN without stereo points or a surface."""
+    from spacepose.silhouette import points_residual
+
     if P is None or surface is None:
         return float("nan")
-    P = np.asarray(P, dtype=np.float64)
-    P = P[np.all(np.isfinite(P), axis=1)]
-    if len(P) == 0:
-        return float("nan")
-    Xo = (P - fit.t) @ fit.R
-    q, nrm, d = surface.query(Xo, cap * tau)
-    e = np.full(len(P), cap)
-    ok = np.isfinite(d)
-    e[ok] = np.minimum(np.abs(np.einsum("ij,ij->i", nrm[ok], Xo[ok] - q[ok])) / tau, cap)
-    return float(e.mean())
+    return points_residual(fit.R, fit.t, P, surface, tau)
 
 
 def collect(dataset: str | Path, bundle: str | Path, *, split: str = "train", skip: int = 0,
