@@ -13,6 +13,13 @@ Measured on this machine, one thread, onnxruntime 1.32, with a training job on t
 26.4 -> 22.1 ms (torch 11.3). 1x1x1 layers already run as one GEMM and stay, as do layers with fewer
 than :data:`MIN_OUT_CHANNELS` outputs.
 
+:class:`ConvTranspose3dAs2d` does the same for a ``ConvTranspose3d`` (the regulariser's decoder
+upsamplers, 4x4x4 with stride 2): one ``ConvTranspose2d`` per depth tap over all input slices, the
+taps summed into the output slices they reach (each output slice gets the taps of its phase, shifted
+by whole slices). onnxruntime runs a 3-D ``ConvTranspose`` through col2im one group at a time; with its
+memory arena the decoder's took 17.5 of the stereo graph's ~130 ms kernel time, the 2-D form 8.0 ms
+(``python -m spacepose.tools.profile_graph_ops``, 2 threads; session 13).
+
 Only the export uses this: training and the torch-eager baseline run the original layers, and the
 export's parity check (torch original vs onnxruntime rewritten) guards the equivalence.
 """
@@ -25,10 +32,12 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-__all__ = ["Conv3dAs2d", "rewrite_conv3d", "wants_rewrite", "MIN_OUT_CHANNELS"]
+__all__ = ["Conv3dAs2d", "ConvTranspose3dAs2d", "NarrowConv3dAs2d", "rewrite_conv3d", "wants_rewrite",
+           "wants_transposed_rewrite", "wants_narrow_rewrite", "MIN_OUT_CHANNELS"]
 
-#: narrower layers (the 1-channel disparity classifier) stay 3-D: onnxruntime's blocked 2-D kernels
-#: need 8 or 16 output channels, and the plain path is slower than its Conv3d
+#: narrower layers (the 1-channel disparity classifier) are not split into per-tap 2-D convolutions:
+#: onnxruntime's blocked 2-D kernels need 8 or 16 output channels, and the plain path is slower than
+#: its Conv3d. :class:`NarrowConv3dAs2d` stacks their depth taps as output channels instead
 MIN_OUT_CHANNELS = 8
 
 
@@ -66,6 +75,131 @@ class Conv3dAs2d(nn.Module):
         return out.reshape((b, d_out, self.out_channels) + tuple(out.shape[-2:])).transpose(1, 2)
 
 
+class ConvTranspose3dAs2d(nn.Module):
+    """The map of ``conv`` (an ``nn.ConvTranspose3d`` with zero padding and no dilation):
+    (B, C, D, H, W) -> (B, C_out, D', H', W') with D' = (D - 1) s_d - 2 p_d + k_d + op_d, computed with
+    ``k_d`` grouped ``ConvTranspose2d`` calls.
+
+    Depth tap j of input slice m lands on output slice ``m s_d - p_d + j``. Output slice
+    ``o = i s_d + k`` (phase k of block i) thus sums the taps ``j = r + q s_d`` (``r = (k + p_d) mod s_d``)
+    of input slices ``i + (k + p_d) div s_d - q``: whole-slice shifts of each tap's 2-D result.
+    """
+
+    def __init__(self, conv: nn.ConvTranspose3d) -> None:
+        super().__init__()
+        if conv.dilation != (1, 1, 1) or conv.padding_mode != "zeros" or isinstance(conv.padding, str):
+            raise ValueError("ConvTranspose3dAs2d needs zero padding given as numbers and no dilation")
+        weight = conv.weight.detach()                                  # (C_in, C_out / g, kd, kh, kw)
+        self.kd = int(weight.shape[2])
+        self.stride = tuple(int(s) for s in conv.stride)
+        self.padding = tuple(int(p) for p in conv.padding)
+        self.output_padding = tuple(int(p) for p in conv.output_padding)
+        self.groups = int(conv.groups)
+        self.weight = nn.Parameter(weight.clone(), requires_grad=False)   # the ConvTranspose3d layout
+        self.bias = None if conv.bias is None else nn.Parameter(conv.bias.detach().clone(), requires_grad=False)
+
+    @staticmethod
+    def _shifted(y: torch.Tensor, shift: int, length: int) -> torch.Tensor | None:
+        """z (B, length, ...) with z[:, i] = y[:, i + shift] where that slice exists, else zeros; None
+        when no slice of y lands in range."""
+        lo, hi = max(0, -shift), min(length, y.shape[1] - shift)        # i range reading y
+        if hi <= lo:
+            return None
+        z = y[:, lo + shift: hi + shift]
+        parts = []
+        if lo:
+            parts.append(torch.zeros_like(y[:, :1]).expand(-1, lo, -1, -1, -1))
+        parts.append(z)
+        if length - hi:
+            parts.append(torch.zeros_like(y[:, :1]).expand(-1, length - hi, -1, -1, -1))
+        return parts[0] if len(parts) == 1 else torch.cat(parts, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        b, c, d, h, w = x.shape
+        sd, sh, sw = self.stride
+        pd, ph, pw = self.padding
+        opd, oph, opw = self.output_padding
+        xs = x.transpose(1, 2).reshape(b * d, c, h, w)
+        taps = []
+        for j in range(self.kd):
+            y = F.conv_transpose2d(xs, self.weight[:, :, j], None, (sh, sw), (ph, pw), (oph, opw), self.groups)
+            taps.append(y.reshape((b, d) + tuple(y.shape[1:])))
+        d_out = (d - 1) * sd - 2 * pd + self.kd + opd
+        blocks = -(-d_out // sd)
+        phases = []
+        for k in range(sd):
+            r, base = (k + pd) % sd, (k + pd) // sd
+            acc = None
+            for j in range(r, self.kd, sd):
+                part = self._shifted(taps[j], base - (j - r) // sd, blocks)
+                if part is not None:
+                    acc = part if acc is None else acc + part
+            phases.append(torch.zeros_like(taps[0][:, :1]).expand(-1, blocks, -1, -1, -1) if acc is None else acc)
+        out = phases[0] if sd == 1 else torch.stack(phases, 2).reshape((b, blocks * sd) + tuple(phases[0].shape[2:]))
+        if blocks * sd != d_out:
+            out = out[:, :d_out]
+        out = out.transpose(1, 2)
+        return out if self.bias is None else out + self.bias.reshape(1, -1, 1, 1, 1)
+
+
+class NarrowConv3dAs2d(nn.Module):
+    """The map of ``conv`` (an ungrouped ``nn.Conv3d`` with few outputs, zero padding, no dilation):
+    (B, C, D, H, W) -> (B, C_out, D', H', W'), computed with one ``Conv2d`` whose ``k_d * C_out``
+    outputs are the depth taps, over every (padded) input slice; output slice o sums tap j of input
+    slice ``o s_d + j``. For the classifier (16 -> 1, 3x3x3, at 24x64x64) onnxruntime takes 3.0-3.2 ms
+    instead of 5.3 ms (2 threads, session 13 scratch timing)."""
+
+    def __init__(self, conv: nn.Conv3d) -> None:
+        super().__init__()
+        if conv.dilation != (1, 1, 1) or conv.padding_mode != "zeros" or isinstance(conv.padding, str):
+            raise ValueError("NarrowConv3dAs2d needs zero padding given as numbers and no dilation")
+        if conv.groups != 1:
+            raise ValueError("NarrowConv3dAs2d needs an ungrouped convolution")
+        weight = conv.weight.detach()                                  # (C_out, C_in, kd, kh, kw)
+        self.kd = int(weight.shape[2])
+        self.stride = tuple(int(s) for s in conv.stride)
+        self.padding = tuple(int(p) for p in conv.padding)
+        self.out_channels = int(weight.shape[0])
+        self.weight = nn.Parameter(weight.clone(), requires_grad=False)   # the Conv3d layout (state dict)
+        self.bias = None if conv.bias is None else nn.Parameter(conv.bias.detach().clone(), requires_grad=False)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        b, c, d, h, w = x.shape
+        pd, ph, pw = self.padding
+        sd, sh, sw = self.stride
+        xt = x.transpose(1, 2)                                         # (B, D, C, H, W)
+        if pd:
+            xt = F.pad(xt, (0, 0, 0, 0, 0, 0, pd, pd))
+        dp = d + 2 * pd
+        d_out = (dp - self.kd) // sd + 1
+        stacked = self.weight.permute(2, 0, 1, 3, 4).reshape((self.kd * self.out_channels,) + tuple(self.weight.shape[1:2])
+                                                             + tuple(self.weight.shape[3:]))
+        y = F.conv2d(xt.reshape(b * dp, c, h, w), stacked, None, (sh, sw), (ph, pw))
+        y = y.reshape((b, dp, self.kd, self.out_channels) + tuple(y.shape[-2:]))
+        out = None
+        for j in range(self.kd):
+            tap = y[:, j: j + sd * (d_out - 1) + 1: sd, j]
+            out = tap if out is None else out + tap
+        out = out.transpose(1, 2)
+        return out if self.bias is None else out + self.bias.reshape(1, -1, 1, 1, 1)
+
+
+def wants_narrow_rewrite(module: nn.Module) -> bool:
+    """True for the Conv3d layers ``rewrite_conv3d(..., narrow=True)`` gives to :class:`NarrowConv3dAs2d`:
+    ungrouped, fewer than :data:`MIN_OUT_CHANNELS` outputs, a kernel deeper than 1, zero padding given
+    as numbers, no dilation."""
+    return (isinstance(module, nn.Conv3d) and not isinstance(module.padding, str)
+            and module.padding_mode == "zeros" and module.dilation == (1, 1, 1) and module.groups == 1
+            and module.out_channels < MIN_OUT_CHANNELS and module.kernel_size[0] > 1)
+
+
+def wants_transposed_rewrite(module: nn.Module) -> bool:
+    """True for the ConvTranspose3d layers ``rewrite_conv3d(..., transposed=True)`` replaces: zero
+    padding given as numbers, no dilation."""
+    return (isinstance(module, nn.ConvTranspose3d) and not isinstance(module.padding, str)
+            and module.padding_mode == "zeros" and module.dilation == (1, 1, 1))
+
+
 def wants_rewrite(module: nn.Module) -> bool:
     """True for the Conv3d layers :func:`rewrite_conv3d` replaces: a kernel wider than 1x1x1 (or a depth
     stride), at least :data:`MIN_OUT_CHANNELS` outputs, zero padding given as numbers, no dilation."""
@@ -75,34 +209,51 @@ def wants_rewrite(module: nn.Module) -> bool:
             and (module.kernel_size != (1, 1, 1) or module.stride[0] > 1))
 
 
-def _fold_batchnorm(conv: nn.Conv3d, bn: nn.BatchNorm3d) -> nn.Conv3d:
+def _fold_batchnorm(conv: nn.Conv3d | nn.ConvTranspose3d, bn: nn.BatchNorm3d) -> nn.Conv3d | nn.ConvTranspose3d:
     """A copy of ``conv`` computing ``bn(conv(x))`` in eval mode (what the ONNX exporter does when the
     BatchNorm directly follows a Conv, which it no longer does once the Conv is rewritten)."""
     scale = bn.weight.detach() / torch.sqrt(bn.running_var + bn.eps) if bn.affine else 1.0 / torch.sqrt(bn.running_var + bn.eps)
     shift = bn.bias.detach() if bn.affine else torch.zeros_like(bn.running_mean)
     folded = copy.deepcopy(conv)
     bias = conv.bias.detach() if conv.bias is not None else torch.zeros_like(bn.running_mean)
-    folded.weight = nn.Parameter(conv.weight.detach() * scale.reshape(-1, 1, 1, 1, 1), requires_grad=False)
+    if isinstance(conv, nn.ConvTranspose3d):                           # weight (C_in, C_out / g, ...)
+        g, per = conv.groups, conv.out_channels // conv.groups
+        w = conv.weight.detach().reshape((g, -1, per) + tuple(conv.weight.shape[2:]))
+        w = w * scale.reshape(g, 1, per, 1, 1, 1)
+        folded.weight = nn.Parameter(w.reshape(conv.weight.shape), requires_grad=False)
+    else:
+        folded.weight = nn.Parameter(conv.weight.detach() * scale.reshape(-1, 1, 1, 1, 1), requires_grad=False)
     folded.bias = nn.Parameter((bias - bn.running_mean) * scale + shift, requires_grad=False)
     return folded
 
 
-def rewrite_conv3d(module: nn.Module) -> nn.Module:
-    """A deep copy of ``module`` in eval mode with every layer :func:`wants_rewrite` accepts replaced by
-    :class:`Conv3dAs2d` (``module`` itself is left untouched). A ``BatchNorm3d`` (with running
+def rewrite_conv3d(module: nn.Module, *, convs: bool = True, transposed: bool = False,
+                   narrow: bool = False) -> nn.Module:
+    """A deep copy of ``module`` in eval mode in which, with ``convs``, every layer
+    :func:`wants_rewrite` accepts is replaced by :class:`Conv3dAs2d`, with ``transposed`` every one
+    :func:`wants_transposed_rewrite` accepts by :class:`ConvTranspose3dAs2d`, and with ``narrow``
+    every one :func:`wants_narrow_rewrite` accepts by :class:`NarrowConv3dAs2d` (``module`` itself
+    is left untouched). A ``BatchNorm3d`` (with running
     statistics) that directly follows such a layer in an ``nn.Sequential`` is folded into it and
     becomes ``nn.Identity``."""
+    def replacement(layer: nn.Module) -> type[nn.Module] | None:
+        if convs and wants_rewrite(layer):
+            return Conv3dAs2d
+        if narrow and wants_narrow_rewrite(layer):
+            return NarrowConv3dAs2d
+        return ConvTranspose3dAs2d if transposed and wants_transposed_rewrite(layer) else None
+
     out = copy.deepcopy(module).eval()
-    if wants_rewrite(out):
-        return Conv3dAs2d(out)
+    if (kind := replacement(out)) is not None:
+        return kind(out)
     for parent in list(out.modules()):
         children = list(parent.named_children())
         for i, (name, child) in enumerate(children):
-            if not wants_rewrite(child):
+            if (kind := replacement(child)) is None:
                 continue
             after = children[i + 1] if isinstance(parent, nn.Sequential) and i + 1 < len(children) else None
             if after is not None and isinstance(after[1], nn.BatchNorm3d) and after[1].track_running_stats:
                 child = _fold_batchnorm(child, after[1])
                 setattr(parent, after[0], nn.Identity())
-            setattr(parent, name, Conv3dAs2d(child))
+            setattr(parent, name, kind(child))
     return out

@@ -6,7 +6,11 @@
   runtimes) — export fails otherwise;
 * Conv3d layers wider than 1x1x1 with at least 8 outputs are exported in the exact 2-D form of
   :mod:`spacepose.export.conv3d_as_2d` (``rewrite_convs``, default on; onnxruntime runs depthwise ones
-  several times faster, dense ones 1.2-1.6x), recorded as ``metadata["export"]["conv3d_as_2d"]``;
+  several times faster, dense ones 1.2-1.6x), recorded as ``metadata["export"]["conv3d_as_2d"]``; the
+  ConvTranspose3d upsamplers likewise (``rewrite_transposed``, default on; about 2x faster in
+  onnxruntime), recorded as ``metadata["export"]["conv_transpose3d_as_2d"]``; and the narrow
+  classifier as one 2-D convolution with its depth taps stacked (``rewrite_narrow``, default on),
+  recorded as ``metadata["export"]["narrow_conv3d_as_2d"]``;
 * the metadata contract (:mod:`spacepose.export.metadata`) is stored under ``"spacepose"``;
 * parity: torch eager vs onnxruntime on a textured stereo pair, max |Δ| in pixels.
 """
@@ -66,9 +70,12 @@ def parity_inputs(size: tuple[int, int], seed: int = 0, disparity: float = 12.0)
 
 def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int, int], iters: int,
                   metadata: Mapping[str, Any], force: bool = False, opset: int = OPSET,
-                  rewrite_convs: bool = True) -> Path:
+                  rewrite_convs: bool = True, rewrite_transposed: bool | None = None,
+                  rewrite_narrow: bool | None = None) -> Path:
     """Export ``model`` at ``size`` (W, H) and ``iters`` into one ONNX file carrying ``metadata``
-    (plus ``metadata["export"]["conv3d_as_2d"] = rewrite_convs``; ``model`` itself is not changed).
+    (plus ``metadata["export"]`` ``"conv3d_as_2d" = rewrite_convs``, ``"conv_transpose3d_as_2d" =
+    rewrite_transposed`` and ``"narrow_conv3d_as_2d" = rewrite_narrow``, the last two defaulting to
+    ``rewrite_convs``; ``model`` itself is not changed).
 
     Raises:
         SpaceposeError: ``path`` exists and ``force`` is False, or the graph holds a forbidden op.
@@ -78,8 +85,13 @@ def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int,
     if w % 32 or h % 32:
         raise SpaceposeError(f"export size must be multiples of 32, got {w}x{h}")
     model = model.eval()
-    wrapper = StereoExportWrapper(rewrite_conv3d(model) if rewrite_convs else model, iters).eval()
-    metadata = {**metadata, "export": {**dict(metadata.get("export") or {}), "conv3d_as_2d": bool(rewrite_convs)}}
+    flags = {"conv3d_as_2d": bool(rewrite_convs),
+             "conv_transpose3d_as_2d": bool(rewrite_convs if rewrite_transposed is None else rewrite_transposed),
+             "narrow_conv3d_as_2d": bool(rewrite_convs if rewrite_narrow is None else rewrite_narrow)}
+    rewritten = (rewrite_conv3d(model, convs=flags["conv3d_as_2d"], transposed=flags["conv_transpose3d_as_2d"],
+                                narrow=flags["narrow_conv3d_as_2d"]) if any(flags.values()) else model)
+    wrapper = StereoExportWrapper(rewritten, iters).eval()
+    metadata = {**metadata, "export": {**dict(metadata.get("export") or {}), **flags}}
     left, right = (torch.from_numpy(a) for a in parity_inputs((w, h)))
     proto = export_onnx_file(wrapper, (left, right), out, input_names=["left", "right"], output_names=["disparity"],
                              metadata=metadata, opset=opset, graph_name="graph")

@@ -120,8 +120,9 @@ def _probe(model: nn.Module, seed: int) -> tuple[nn.Module, dict[str, str]]:
 def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, object] | None:
     """The state key whose values are closest to ``value``, within 1 % (a folded BatchNorm scales a
     convolution by its probe gamma, 1 +- 0.3 %), and how it is laid out: ``"flat"`` (same values,
-    flattened), ``"T"`` (a 2-D transpose) or ``("tap", j)`` (depth tap ``ref[:, :, j]`` of a 5-D
-    convolution weight, as :mod:`spacepose.export.conv3d_as_2d` exports it)."""
+    flattened), ``"T"`` (a 2-D transpose), ``"stacked"`` (the depth taps of a 5-D convolution weight
+    stacked along its outputs) or ``("tap", j)`` (depth tap ``ref[:, :, j]`` of a 5-D convolution
+    weight); the last two as :mod:`spacepose.export.conv3d_as_2d` exports them."""
     flat = value.reshape(-1).astype(np.float64)
     scale = float(np.max(np.abs(flat))) + 1e-12
     best: tuple[float, str, object] | None = None
@@ -131,6 +132,8 @@ def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, o
             options.append((ref.reshape(-1), "flat"))
             if ref.ndim == 2 and value.shape == ref.shape[::-1]:
                 options.append((ref.T.reshape(-1), "T"))
+            if ref.ndim == 5 and value.ndim == 4 and ref.shape[2] > 1:
+                options.append((np.moveaxis(ref, 2, 0).reshape(-1), "stacked"))
         elif ref.ndim == 5 and ref.size == flat.size * ref.shape[2]:
             options += [(ref[:, :, j].reshape(-1), ("tap", j)) for j in range(ref.shape[2])]
         for arr, layout in options:
@@ -204,6 +207,9 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
             taps.setdefault(key, {})[layout[1]] = value_b
             continue
         value = value_b.T if layout == "T" else value_b
+        if layout == "stacked":                         # (kd * C_out, C_in, kh, kw) -> (C_out, C_in, kd, kh, kw)
+            shape = tuple(state[key].shape)
+            value = np.moveaxis(np.asarray(value_b).reshape((shape[2], shape[0], shape[1]) + shape[3:]), 0, 2)
         assigned[key] = np.ascontiguousarray(value).reshape(state[key].shape)
         if key in bn_of_bias and not name_a.startswith(prefix + key):
             folded.add(bn_of_bias[key])
@@ -280,9 +286,11 @@ def checkpoint_from_graph(onnx_path: str | os.PathLike) -> dict:
         config = StereoConfig.from_dict(meta["config"])
         size, iters = tuple(int(v) for v in meta["input_size"]), int(meta["iters"])
         model = TSCAStereo(config).eval()
-        rewrite = bool((meta.get("export") or {}).get("conv3d_as_2d"))
+        flags = meta.get("export") or {}  # an exporter option absent from older graphs' metadata was off
         report = recover_state_dict(model, onnx_path, lambda m, p: onnx_stereo.export_stereo(
-            m, p, size=size, iters=iters, metadata={}, force=True, rewrite_convs=rewrite), prefix="model.")
+            m, p, size=size, iters=iters, metadata={}, force=True, rewrite_convs=bool(flags.get("conv3d_as_2d")),
+            rewrite_transposed=bool(flags.get("conv_transpose3d_as_2d")),
+            rewrite_narrow=bool(flags.get("narrow_conv3d_as_2d"))), prefix="model.")
         diff = onnx_stereo.parity_check(model, onnx_path, size=size, iters=iters)
         tolerance = 1e-3
         ckpt = {"kind": "stereo", "stereo_config": config.to_dict()}

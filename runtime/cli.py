@@ -35,6 +35,7 @@ COMMANDS: dict[str, str] = {
     "export-pose": "spacepose.export.cli_export_pose",
     "quantize": "spacepose.export.cli_quantize",
     "recover-checkpoint": "spacepose.export.cli_recover",
+    "reexport": "spacepose.export.cli_reexport",
     "export-surface": "spacepose.export.cli_surface",
 }
 

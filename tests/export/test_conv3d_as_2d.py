@@ -11,7 +11,9 @@ ort = pytest.importorskip("onnxruntime")
 
 from torch import nn  # noqa: E402
 
-from spacepose.export.conv3d_as_2d import Conv3dAs2d, rewrite_conv3d, wants_rewrite  # noqa: E402
+from spacepose.export.conv3d_as_2d import (Conv3dAs2d, ConvTranspose3dAs2d, NarrowConv3dAs2d,  # noqa: E402
+                                            rewrite_conv3d, wants_narrow_rewrite, wants_rewrite,
+                                            wants_transposed_rewrite)
 
 CASES = [  # (in, out, kernel, stride, padding, groups, bias, input shape)
     (8, 8, 5, 1, 2, 8, True, (1, 8, 6, 9, 10)),        # SECA key: depthwise 5x5x5
@@ -100,3 +102,109 @@ def test_rejects_what_it_cannot_express():
         Conv3dAs2d(nn.Conv3d(2, 2, 3, dilation=2))
     with pytest.raises(ValueError, match="zero padding"):
         Conv3dAs2d(nn.Conv3d(2, 2, 3, padding=1, padding_mode="replicate"))
+
+
+TRANSPOSED = [  # (in, out, kernel, stride, padding, output padding, groups, bias, input shape)
+    (16, 8, 4, 2, 1, 0, 1, False, (1, 16, 6, 10, 12)),               # the regulariser's decoder upsampler
+    (8, 8, 3, 2, 1, 1, 1, True, (2, 8, 5, 7, 6)),                    # odd kernel, output padding, batch 2
+    (6, 4, (3, 2, 4), (3, 2, 1), (1, 0, 2), (2, 1, 0), 2, True, (1, 6, 4, 5, 7)),  # anisotropic, 2 groups
+    (4, 4, 2, 2, 0, 0, 4, True, (1, 4, 3, 4, 4)),                    # depthwise, kernel = stride
+    (4, 6, 3, 1, 1, 0, 1, True, (1, 4, 5, 5, 5)),                    # stride 1
+    (4, 4, 5, 2, 0, 0, 1, False, (1, 4, 3, 3, 3)),                   # kernel > 2 strides, no padding
+]
+
+
+def _transposed(c_in, c_out, k, s, p, op, g, bias, seed=0):
+    torch.manual_seed(seed)
+    return nn.ConvTranspose3d(c_in, c_out, k, s, p, op, groups=g, bias=bias).eval()
+
+
+@pytest.mark.parametrize("case", TRANSPOSED, ids=lambda c: f"k{c[2]}s{c[3]}p{c[4]}g{c[6]}")
+def test_matches_conv_transpose3d_in_torch(case):
+    *args, shape = case
+    conv = _transposed(*args)
+    x = torch.randn(shape)
+    with torch.no_grad():
+        want, got = conv(x), ConvTranspose3dAs2d(conv)(x)
+    assert got.shape == want.shape
+    assert float(torch.max(torch.abs(got - want))) < 1e-5
+
+
+@pytest.mark.parametrize("case", TRANSPOSED[:3], ids=lambda c: f"k{c[2]}s{c[3]}p{c[4]}g{c[6]}")
+def test_matches_conv_transpose3d_in_onnxruntime(case):
+    *args, shape = case
+    conv = _transposed(*args, seed=2)
+    x = torch.randn(shape)
+    buf = io.BytesIO()
+    torch.onnx.export(ConvTranspose3dAs2d(conv), (x,), buf, opset_version=17, dynamo=False, input_names=["x"])
+    proto = onnx.load_from_string(buf.getvalue())
+    kernels = [next(a.ints for a in n.attribute if a.name == "kernel_shape")
+               for n in proto.graph.node if n.op_type == "ConvTranspose"]
+    assert kernels and all(len(k) == 2 for k in kernels)                    # only 2-D ones left
+    (got,) = ort.InferenceSession(buf.getvalue(), providers=["CPUExecutionProvider"]).run(None, {"x": x.numpy()})
+    with torch.no_grad():
+        want = conv(x).numpy()
+    assert got.shape == want.shape and np.max(np.abs(got - want)) < 1e-5
+
+
+def test_transposed_rewrite_is_opt_in_and_folds_batchnorm():
+    torch.manual_seed(4)
+    model = nn.Sequential(nn.ConvTranspose3d(8, 6, 4, 2, 1, groups=2, bias=False), nn.BatchNorm3d(6),
+                          nn.LeakyReLU(0.2), nn.Conv3d(6, 8, 3, 1, 1)).eval()
+    with torch.no_grad():
+        model[1].weight.uniform_(0.5, 1.5)
+        model[1].bias.normal_()
+        model[1].running_mean.normal_()
+        model[1].running_var.uniform_(0.5, 2.0)
+    kinds = lambda m: [type(c) for c in m]  # noqa: E731
+    assert kinds(rewrite_conv3d(model)) == [nn.ConvTranspose3d, nn.BatchNorm3d, nn.LeakyReLU, Conv3dAs2d]
+    assert kinds(rewrite_conv3d(model, convs=False, transposed=True)) == [ConvTranspose3dAs2d, nn.Identity,
+                                                                          nn.LeakyReLU, nn.Conv3d]
+    both = rewrite_conv3d(model, transposed=True)
+    assert kinds(both) == [ConvTranspose3dAs2d, nn.Identity, nn.LeakyReLU, Conv3dAs2d]
+    assert type(model[0]) is nn.ConvTranspose3d and type(model[1]) is nn.BatchNorm3d   # original untouched
+    x = torch.randn(1, 8, 4, 6, 5)
+    with torch.no_grad():
+        assert float(torch.max(torch.abs(both(x) - model(x)))) < 1e-5
+    assert wants_transposed_rewrite(model[0]) and not wants_transposed_rewrite(nn.ConvTranspose2d(4, 4, 2))
+
+
+def test_transposed_rejects_what_it_cannot_express():
+    with pytest.raises(ValueError, match="dilation"):
+        ConvTranspose3dAs2d(nn.ConvTranspose3d(2, 2, 3, dilation=2))
+    assert not wants_transposed_rewrite(nn.ConvTranspose3d(2, 2, 3, dilation=2))
+
+
+NARROW = [  # (in, out, kernel, stride, padding, bias, input shape)
+    (16, 1, 3, 1, 1, True, (1, 16, 6, 8, 8)),                          # the disparity classifier
+    (8, 3, (3, 1, 3), (2, 1, 2), (1, 0, 1), False, (2, 8, 7, 6, 9)),   # strided, anisotropic, batch 2
+    (4, 2, 5, 1, 0, True, (1, 4, 7, 5, 5)),                            # no padding
+]
+
+
+@pytest.mark.parametrize("case", NARROW, ids=lambda c: f"o{c[1]}k{c[2]}s{c[3]}")
+def test_narrow_matches_conv3d_in_torch_and_onnxruntime(case):
+    c_in, c_out, k, s, p, bias, shape = case
+    torch.manual_seed(5)
+    conv = nn.Conv3d(c_in, c_out, k, s, p, bias=bias).eval()
+    x = torch.randn(shape)
+    with torch.no_grad():
+        want, got = conv(x), NarrowConv3dAs2d(conv)(x)
+    assert got.shape == want.shape and float(torch.max(torch.abs(got - want))) < 1e-5
+    buf = io.BytesIO()
+    torch.onnx.export(NarrowConv3dAs2d(conv), (x,), buf, opset_version=17, dynamo=False, input_names=["x"])
+    convs = [n for n in onnx.load_from_string(buf.getvalue()).graph.node if n.op_type == "Conv"]
+    assert len(convs) == 1 and len(next(a.ints for a in convs[0].attribute if a.name == "kernel_shape")) == 2
+    (out,) = ort.InferenceSession(buf.getvalue(), providers=["CPUExecutionProvider"]).run(None, {"x": x.numpy()})
+    assert np.max(np.abs(out - want.numpy())) < 1e-5
+
+
+def test_narrow_rewrite_is_opt_in():
+    model = nn.Sequential(nn.Conv3d(8, 8, 3, 1, 1), nn.Conv3d(8, 1, 3, 1, 1), nn.Conv3d(8, 1, 1),
+                          nn.Conv3d(2, 2, 3, groups=2)).eval()
+    assert [type(m) for m in rewrite_conv3d(model)] == [Conv3dAs2d, nn.Conv3d, nn.Conv3d, nn.Conv3d]
+    assert [type(m) for m in rewrite_conv3d(model, narrow=True)] == [Conv3dAs2d, NarrowConv3dAs2d, nn.Conv3d,
+                                                                     nn.Conv3d]     # not 1x1x1, not grouped
+    assert wants_narrow_rewrite(model[1]) and not wants_narrow_rewrite(model[0]) and not wants_narrow_rewrite(model[3])
+    with pytest.raises(ValueError, match="ungrouped"):
+        NarrowConv3dAs2d(nn.Conv3d(2, 2, 3, groups=2))

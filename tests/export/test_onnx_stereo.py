@@ -38,20 +38,25 @@ def test_metadata_roundtrip(exported):
     assert got["kind"] == "stereo" and got["input_size"] == [64, 32] and got["iters"] == 2
     assert got["variant"] == "full" and got["max_disp"] == 96 and got["dataset"] == {"seed": 7, "size": 10}
     assert "training_commit" in got and got["config"]["variant"] == "full"
-    assert got["export"] == {"conv3d_as_2d": True}
+    assert got["export"] == {"conv3d_as_2d": True, "conv_transpose3d_as_2d": True, "narrow_conv3d_as_2d": True}
 
 
 def test_grouped_3d_convs_are_exported_as_2d(exported):
-    """The rewrite of :mod:`spacepose.export.conv3d_as_2d` is applied: the 3-D Convs left are 1x1x1 or
-    the 1-channel classifier."""
+    """The rewrites of :mod:`spacepose.export.conv3d_as_2d` are applied: the only 3-D Convs left are
+    1x1x1 (the 1-channel classifier is a 2-D Conv with its 3 depth taps as outputs)."""
     path, _, _ = exported
     proto = onnx.load(str(path))
     weights = {i.name: list(i.dims) for i in proto.graph.initializer}
     convs = [({a.name: onnx.helper.get_attribute_value(a) for a in n.attribute}, weights.get(n.input[1]))
              for n in proto.graph.node if n.op_type == "Conv"]
     conv3d = [(a, w) for a, w in convs if len(a["kernel_shape"]) == 3]
-    assert conv3d and all(a["kernel_shape"] == [1, 1, 1] or w[0] == 1 for a, w in conv3d)
+    assert conv3d and all(a["kernel_shape"] == [1, 1, 1] for a, _ in conv3d)
+    assert any(len(a["kernel_shape"]) == 2 and w[0] == 3 for a, w in convs)        # the stacked classifier
     assert any(len(a["kernel_shape"]) == 2 and a.get("group", 1) > 1 for a, _ in convs)
+    transposed = [n for n in proto.graph.node if n.op_type == "ConvTranspose"]   # the decoder upsamplers: 2-D
+    assert transposed and all(len(onnx.helper.get_attribute_value(a)) == 2
+                              for n in transposed for a in n.attribute if a.name == "kernel_shape")
+    assert not any(n.op_type == "BatchNormalization" for n in proto.graph.node)    # folded into them
 
 
 def test_parity_torch_vs_onnxruntime(exported):

@@ -58,6 +58,7 @@ def test_stereo_weights_come_back(stereo_graph):
     model = TSCAStereo(cfg).eval()
     report = recover_state_dict(model, path, _export_stereo, prefix="model.")
     assert report.folded_bn                                  # the exporter folded BatchNorms into convs
+    assert any(".up.1" in name for name in report.folded_bn)  # ... and into the rewritten ConvTranspose3d
     # only the training-time upsampler of the initial disparity is absent from an inference graph
     assert all(k.startswith("init_mask.") for k in report.missing)
     left, right = (torch.from_numpy(a) for a in onnx_stereo.parity_inputs(SIZE))
@@ -115,17 +116,27 @@ def test_checkpoint_from_graph_feeds_training(stereo_graph, tmp_path):
     model.load_state_dict(ckpt["model"])
 
 
-def test_checkpoint_from_graph_without_conv_rewrite(tmp_path):
-    """Graphs exported before the Conv3d -> Conv2d rewrite (metadata without the flag) still recover."""
+def _kernel_dims(node) -> int:
+    return len(next(a.ints for a in node.attribute if a.name == "kernel_shape"))
+
+
+@pytest.mark.parametrize("convs", [False, True], ids=["plain", "convs-only"])
+def test_checkpoint_from_graph_without_conv_rewrite(tmp_path, convs):
+    """Graphs exported before the Conv3d -> Conv2d rewrite (plain), or before the ConvTranspose3d one
+    (convs-only: the shipped graphs of sessions 6-12), still recover."""
     torch.manual_seed(0)
     cfg = StereoConfig.cpu()
     model = _randomise_batchnorm(TSCAStereo(cfg), 6)
     meta = stereo_metadata(input_size=SIZE, iters=ITERS, stereo_config=cfg.to_dict(), dataset={"seed": 1, "size": 4})
     path = onnx_stereo.export_stereo(model, tmp_path / "plain.onnx", size=SIZE, iters=ITERS, metadata=meta,
-                                     rewrite_convs=False)
-    assert not any(n.op_type == "Conv" and any(a.name == "group" and a.i > 1 for a in n.attribute)
-                   and len(next(a.ints for a in n.attribute if a.name == "kernel_shape")) == 2
-                   for n in onnx.load(str(path)).graph.node)
+                                     rewrite_convs=convs, rewrite_transposed=False, rewrite_narrow=False)
+    nodes = onnx.load(str(path)).graph.node
+    grouped_2d = any(n.op_type == "Conv" and any(a.name == "group" and a.i > 1 for a in n.attribute)
+                     and _kernel_dims(n) == 2 for n in nodes)
+    assert grouped_2d == convs
+    assert all(_kernel_dims(n) == 3 for n in nodes if n.op_type == "ConvTranspose")
+    kernels = [list(next(a.ints for a in n.attribute if a.name == "kernel_shape")) for n in nodes if n.op_type == "Conv"]
+    assert [3, 3, 3] in kernels                                   # the classifier as a 3-D conv
     ckpt = checkpoint_from_graph(path)
     assert ckpt["parity"] < 1e-3
     again = TSCAStereo(cfg).eval()
