@@ -8,6 +8,12 @@ one process per backend so that neither warms the other's caches. Median and p95
 call and the speed-up are printed as a markdown table and written as JSON. Timings are never
 asserted in tests.
 
+This machine's speed drifts by up to 40 % from one process to the next (session 13: the same graph
+took 92 and 131 ms median in two runs a minute apart). ``--rounds N`` therefore runs every backend's
+process N times, in turn (round r starts at backend r), pools all their calls for the median and
+p95, and records each round's median and each round's speed-up over torch eager (whose median over
+rounds is the steadier figure when the drift is slow), so that a drift hits every backend alike.
+
     python -m spacepose.tools.bench_graphs data/tdrs640 --stereo-ckpt runs/stereo_full/last.pt \
         --pose-ckpt runs/pose_both/last.pt --threads 2 --out reports/bench_graphs.json \
         [--extra-bundle int8=runs/bundle_int8 --extra-bundle fp16=runs/bundle_fp16]
@@ -27,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["time_calls", "main"]
+__all__ = ["time_calls", "summarize", "run_rounds", "add_round_speedups", "main"]
 
 
 def time_calls(fn, feeds: list[Any], repeats: int) -> dict[str, float]:
@@ -40,9 +46,14 @@ def time_calls(fn, feeds: list[Any], repeats: int) -> dict[str, float]:
             t0 = time.perf_counter()
             fn(feed)
             times.append((time.perf_counter() - t0) * 1e3)
-    arr = np.asarray(times)
+    return summarize(times)
+
+
+def summarize(times_ms: list[float]) -> dict[str, Any]:
+    """Median / p95 / mean milliseconds and the call count of ``times_ms``, plus the times themselves."""
+    arr = np.asarray(times_ms, dtype=np.float64)
     return {"median_ms": float(np.median(arr)), "p95_ms": float(np.percentile(arr, 95)), "mean_ms": float(arr.mean()),
-            "calls": int(arr.size)}
+            "calls": int(arr.size), "times_ms": [round(float(t), 3) for t in arr]}
 
 
 def _worker(args: argparse.Namespace) -> None:
@@ -96,6 +107,44 @@ def _child(graph: str, backend: str, feeds_path: Path, args: argparse.Namespace,
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+def run_rounds(jobs: list[tuple[str, str, dict[str, Any]]], child, rounds: int) -> list[dict[str, Any]]:
+    """One row per job, ``{"graph", "backend", median_ms, p95_ms, mean_ms, calls, round_medians_ms}``
+    (or ``"error"``), from ``rounds`` runs of every job's ``child(graph, kwargs)``, each round's order
+    rotated by one job within each graph; the times of all rounds are pooled."""
+    times: dict[int, list[float]] = {i: [] for i in range(len(jobs))}
+    medians: dict[int, list[float]] = {i: [] for i in range(len(jobs))}
+    errors: dict[int, str] = {}
+    for r in range(max(int(rounds), 1)):
+        for graph in dict.fromkeys(job[0] for job in jobs):
+            ids = [i for i, job in enumerate(jobs) if job[0] == graph]
+            for i in ids[r % len(ids):] + ids[:r % len(ids)]:
+                if i in errors:
+                    continue
+                result = child(graph, jobs[i][2])
+                if "error" in result:
+                    errors[i] = result["error"]
+                    continue
+                times[i] += result["times_ms"]
+                medians[i].append(result["median_ms"])
+    rows = []
+    for i, (graph, label, _) in enumerate(jobs):
+        if i in errors:
+            rows.append({"graph": graph, "backend": label, "error": errors[i]})
+        else:
+            rows.append({"graph": graph, "backend": label, **summarize(times[i]), "round_medians_ms": medians[i]})
+    return rows
+
+
+def add_round_speedups(rows: list[dict[str, Any]]) -> None:
+    """Set ``row["round_speedups"]``: per round, torch eager's median over the row's (same graph), for
+    rows that ran every round, as torch did."""
+    for r in rows:
+        torch_row = next((x for x in rows if x["graph"] == r["graph"] and x["backend"].startswith("torch")
+                          and "median_ms" in x), None)
+        if torch_row is not None and "median_ms" in r and len(r["round_medians_ms"]) == len(torch_row["round_medians_ms"]):
+            r["round_speedups"] = [t / m for t, m in zip(torch_row["round_medians_ms"], r["round_medians_ms"])]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m spacepose.tools.bench_graphs", description=__doc__.split("\n")[0])
     parser.add_argument("dataset", nargs="?")
@@ -106,6 +155,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=4)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=1,
+                        help="run every backend's process this many times, in turn, and pool the calls")
     parser.add_argument("--out", type=Path, default=None)
     # worker mode (one backend in a fresh process)
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
@@ -129,30 +180,37 @@ def main(argv: list[str] | None = None) -> int:
     bundle = load_bundle(args.bundle)
     stereo_feeds, pose_feeds = record_calibration_feeds(bundle.path, args.dataset, args.frames, split="test")
     iters = int(read_metadata(bundle.stereo_path)["iters"])
-    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         feeds_path = Path(tmp) / "feeds.pkl"
         with open(feeds_path, "wb") as fh:
             pickle.dump({"stereo": stereo_feeds, "pose": pose_feeds}, fh)
         bundles = [("fp32", bundle)] + [(name, load_bundle(folder)) for name, folder in
                                         (item.split("=", 1) for item in args.extra_bundle)]
+        jobs = []  # (graph, backend label, child kwargs)
         for graph, ckpt in (("stereo", args.stereo_ckpt), ("pose", args.pose_ckpt)):
             for name, b in bundles:
                 path = str(b.stereo_path if graph == "stereo" else b.pose_path)
-                rows.append({"graph": graph, "backend": f"onnxruntime {name}",
-                             **_child(graph, "ort", feeds_path, args, onnx_path=path)})
+                jobs.append((graph, f"onnxruntime {name}", {"backend": "ort", "onnx_path": path}))
             if ckpt is not None:
-                rows.append({"graph": graph, "backend": "torch eager fp32",
-                             **_child(graph, "torch", feeds_path, args, iters=iters)})
-    lines = ["| graph | backend | calls | median ms | p95 ms | torch eager / this (median) |", "|---|---|---|---|---|---|"]
+                jobs.append((graph, "torch eager fp32", {"backend": "torch", "iters": iters}))
+        rows = run_rounds(jobs, lambda graph, kw: _child(graph, kw["backend"], feeds_path, args,
+                                                         onnx_path=kw.get("onnx_path"), iters=kw.get("iters")),
+                          args.rounds)
+    add_round_speedups(rows)
+    lines = ["| graph | backend | calls | median ms | p95 ms | torch eager / this (median) | round medians ms "
+             "| per-round speed-ups (median) |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         torch_row = next((x for x in rows if x["graph"] == r["graph"] and x["backend"].startswith("torch")
                           and "median_ms" in x), None)
         if "median_ms" not in r:
-            lines.append(f"| {r['graph']} | {r['backend']} | — | error: {r.get('error')} | | |")
+            lines.append(f"| {r['graph']} | {r['backend']} | — | error: {r.get('error')} | | | | |")
             continue
         ratio = f"{torch_row['median_ms'] / r['median_ms']:.2f}×" if torch_row else "—"
-        lines.append(f"| {r['graph']} | {r['backend']} | {r['calls']} | {r['median_ms']:.1f} | {r['p95_ms']:.1f} | {ratio} |")
+        per_round = " / ".join(f"{m:.0f}" for m in r.get("round_medians_ms", []))
+        speedups = r.get("round_speedups") or []
+        paired = (" / ".join(f"{v:.2f}" for v in speedups) + f" ({float(np.median(speedups)):.2f}×)") if speedups else "—"
+        lines.append(f"| {r['graph']} | {r['backend']} | {r['calls']} | {r['median_ms']:.1f} | {r['p95_ms']:.1f} | {ratio} "
+                     f"| {per_round} | {paired} |")
     text = "\n".join(lines)
     print(text)
     if args.out is not None:
