@@ -4,13 +4,14 @@ The exporter improves (session 13: the stereo regulariser's ConvTranspose3d laye
 a graph has shipped. :func:`reexport_graph` rebuilds the trained model from the graph itself
 (:func:`spacepose.export.recover.checkpoint_from_graph`), exports it again with the exporter's current
 options and the graph's own metadata (its training, data and test metrics stay true: the function is
-unchanged), and checks three ways: the recovered model against the old graph (inside the recovery),
+unchanged; ``exported_utc`` is the new export's, ``reexported`` says from what), and checks three ways: the recovered model against the old graph (inside the recovery),
 the recovered model against the new graph (torch vs onnxruntime), and the old graph against the new
 one (onnxruntime vs onnxruntime). The new file is removed again when a check fails.
 """
 
 from __future__ import annotations
 
+import datetime as _dt
 import logging
 import os
 from pathlib import Path
@@ -56,7 +57,10 @@ def reexport_graph(graph: str | os.PathLike, out: str | os.PathLike, *, force: b
     check_overwrite(dst, force)
     meta = read_metadata(src)
     ckpt = checkpoint_from_graph(src)
-    keep = {k: v for k, v in meta.items() if k not in ("export", "exported_utc")}
+    keep = {k: v for k, v in meta.items() if k not in ("export", "exported_utc", "reexported")}
+    keep["exported_utc"] = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    keep["reexported"] = {"from": src.name, "first_exported_utc": (meta.get("reexported") or {}).get(
+        "first_exported_utc", meta.get("exported_utc")), "previous_export": meta.get("export") or {}}
     if ckpt["kind"] == "stereo":
         from spacepose.models.stereo_config import StereoConfig
         from spacepose.models.tsca_stereo import TSCAStereo

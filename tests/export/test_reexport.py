@@ -63,6 +63,9 @@ def test_stereo_graph_comes_back_in_the_new_form(old_stereo, tmp_path):
     old_meta, new_meta = read_metadata(path), read_metadata(out)
     for key in ("dataset", "metrics", "training", "config", "input_size", "iters", "max_disp", "training_commit"):
         assert new_meta[key] == old_meta[key], key
+    assert new_meta["exported_utc"] >= old_meta["exported_utc"]
+    assert new_meta["reexported"] == {"from": "stereo.onnx", "first_exported_utc": old_meta["exported_utc"],
+                                      "previous_export": old_meta["export"]}
     # the two graphs agree on another pair than the checks' own
     rng = np.random.default_rng(4)
     left = (rng.random((1, 3, SIZE[1], SIZE[0])) * 255).astype(np.float32)
