@@ -4,9 +4,10 @@ The exporter improves (session 13: the stereo regulariser's ConvTranspose3d laye
 a graph has shipped. :func:`reexport_graph` rebuilds the trained model from the graph itself
 (:func:`spacepose.export.recover.checkpoint_from_graph`), exports it again with the exporter's current
 options and the graph's own metadata (its training, data and test metrics stay true: the function is
-unchanged; ``exported_utc`` is the new export's, ``reexported`` says from what), and checks three ways: the recovered model against the old graph (inside the recovery),
-the recovered model against the new graph (torch vs onnxruntime), and the old graph against the new
-one (onnxruntime vs onnxruntime). The new file is removed again when a check fails.
+unchanged; ``exported_utc`` is the new export's, ``reexported`` says from what). It checks three
+ways: the recovered model against the old graph (inside the recovery), the recovered model against
+the new graph (torch vs onnxruntime), and the old graph against the new one (onnxruntime vs
+onnxruntime). The new file is removed again when a check fails.
 """
 
 from __future__ import annotations

@@ -11,8 +11,9 @@ asserted in tests.
 This machine's speed drifts by up to 40 % from one process to the next (session 13: the same graph
 took 92 and 131 ms median in two runs a minute apart). ``--rounds N`` therefore runs every backend's
 process N times, in turn (round r starts at backend r), pools all their calls for the median and
-p95, and records each round's median and each round's speed-up over torch eager (whose median over
-rounds is the steadier figure when the drift is slow), so that a drift hits every backend alike.
+p95, so that a drift hits every backend alike. It also records each round's median and each round's
+speed-up over torch eager; the median of those speed-ups is the steadier figure when the drift is
+slower than a round.
 
     python -m spacepose.tools.bench_graphs data/tdrs640 --stereo-ckpt runs/stereo_full/last.pt \
         --pose-ckpt runs/pose_both/last.pt --threads 2 --out reports/bench_graphs.json \
