@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Callable
 
-__all__ = ["parse_size", "size_type"]
+__all__ = ["non_negative_int", "parse_size", "size_type"]
 
 
 def parse_size(text: str, min_side: int | None = None) -> tuple[int, int]:
@@ -27,3 +27,14 @@ def size_type(min_side: int) -> Callable[[str], tuple[int, int]]:
         return parse_size(text, min_side)
 
     return parse
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value

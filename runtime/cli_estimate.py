@@ -19,6 +19,7 @@ from typing import Iterator, TextIO
 
 import numpy as np
 
+from .cli_args import non_negative_int
 from .errors import DatasetError, ImageReadError
 
 HELP = "estimate the target pose for every stereo pair of a folder (left/, right/) -> JSON lines"
@@ -36,7 +37,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overlay", type=Path, default=None, help="folder for left images with the projected target box")
     parser.add_argument("--bundle", type=Path, default=None, help="model bundle folder (default: the shipped one)")
     parser.add_argument("--threads", type=int, default=2, help="onnxruntime threads per graph (default 2)")
-    parser.add_argument("--no-prior", action="store_true", help="run the coarse stereo pass on every frame")
+    parser.add_argument("--no-prior", action="store_true",
+                        help="no prior between frames: the coarse stereo pass on every frame, no tracking")
+    parser.add_argument("--prior-max-gap", type=non_negative_int, default=None, metavar="N",
+                        help="frames a valid pose stays the prior while none is valid (default: the estimator's, 5)")
     parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
 
 
@@ -161,7 +165,9 @@ def run(args: argparse.Namespace) -> int:
     folder: Path = args.folder
     names = list_frames(folder)
     check_outputs([args.out, args.csv], args.overlay, args.force)
-    estimator = PoseEstimator(args.calib, bundle=args.bundle, threads=args.threads, use_prior=not args.no_prior)
+    extra = {} if args.prior_max_gap is None else {"prior_max_gap": args.prior_max_gap}
+    estimator = PoseEstimator(args.calib, bundle=args.bundle, threads=args.threads, use_prior=not args.no_prior,
+                              **extra)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if args.overlay is not None:
         args.overlay.mkdir(parents=True, exist_ok=True)

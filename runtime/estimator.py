@@ -22,10 +22,10 @@ size that does not match the calibration, NaN/inf in a float image — gives a r
 0-255 scale. An all-dark frame (eclipse) gives ``no_target``; a saturated frame ``bad_input``.
 
 Thread safety: :meth:`PoseEstimator.estimate` may be called from several threads. The onnxruntime
-sessions and the rectification maps are safe to share; the only mutable state, the previous pose
-used as the next frame's ROI prior (and, with registration, to decide an ambiguous frame), is read
-and written under ``self._lock``. With concurrent calls the prior is that of whichever frame
-finished last.
+sessions and the rectification maps are safe to share; the only mutable state, the prior (the last
+valid pose and how many frames ago it was, used as the next frame's ROI and, with registration, to
+decide an ambiguous frame), is read and written under ``self._lock``. With concurrent calls the
+prior is that of whichever frame finished last.
 """
 
 from __future__ import annotations
@@ -63,6 +63,8 @@ DARK_FRACTION = 0.02
 #: a frame with more than this fraction of pixels at full scale is "saturated"
 SATURATED_FRACTION = 0.5
 #: statuses after which a frame run in the previous pose's window is run again with the coarse pass
+#: frames a valid pose stays the prior after it while no other is valid (see ``PoseEstimator``)
+PRIOR_MAX_GAP = 5
 _WINDOW_MISSES = frozenset({"no_target", "too_few_points", "out_of_range", "fit_residual"})
 
 
@@ -90,8 +92,9 @@ class PoseResult:
             registered pose and its runner-up (:mod:`spacepose.registration`). Not part of the JSON line.
         depth_tolerance_m: the registration's depth tolerance ``tau`` for this frame (NaN without
             registration). Not part of the JSON line.
-        tracked: the pose was decided by the previous frame's (registration with ``use_prior``:
-            the frame alone could not tell the pose from its flip). Not part of the JSON line.
+        tracked: the pose was decided by the prior, the last valid pose at most ``prior_max_gap``
+            frames back (registration with ``use_prior``: the frame alone could not tell the pose
+            from its flip). Not part of the JSON line.
         outline_chamfer_px, outline_margin_px: with the bundle's ``silhouette`` stage, the chamfer
             distance (outline px: pixels of a ``max_side_px`` view of the stereo window) of the best outline-refined pose to the outline the stereo
             disparity shows, and the gap to the best pose more than 90° from it
@@ -256,7 +259,14 @@ class PoseEstimator:
             the default bundle.
         threads: onnxruntime intra-op threads per graph.
         use_prior: use the previous valid pose's projected bounding sphere as the next frame's ROI
-            (skips the coarse stereo pass).
+            (skips the coarse stereo pass), and let it decide between a registered pose and its flip
+            (``tracked``).
+        prior_max_gap: a valid pose stays the prior through this many following frames without one
+            (an eclipse, a frame whose checks refuse its pose, a bad frame); 0: only the frame right
+            after it. The tracking gates (``registration.track_max_deg`` / ``track_max_m``) are not
+            widened for the gap, so after a longer gap the target must still be within them of the old
+            pose (a flip, 180° away, never is). Measured on the five rendered sequences (session 13,
+            ``python -m spacepose.tools.sequence eval``): see the model card.
         refine: point-to-plane ICP against the stereo points (needs ``surface_points`` in the bundle).
         seed: seed of the point sampling and MeanShift seeds (results are deterministic).
 
@@ -266,7 +276,8 @@ class PoseEstimator:
     """
 
     def __init__(self, calib: str | os.PathLike | Any, bundle: str | os.PathLike | ModelBundle | None = None,
-                 threads: int = 2, use_prior: bool = True, refine: bool = False, seed: int = 0) -> None:
+                 threads: int = 2, use_prior: bool = True, refine: bool = False, seed: int = 0,
+                 prior_max_gap: int = PRIOR_MAX_GAP) -> None:
         from .calibration.rectify import rectify
         from .calibration.rig import StereoRig, load_rig
         from .onnx_session import make_session
@@ -287,6 +298,9 @@ class PoseEstimator:
         self.baseline_m = self.rectification.baseline_m
         self.threads = int(threads)
         self.use_prior = bool(use_prior)
+        if int(prior_max_gap) < 0:
+            raise ValueError(f"prior_max_gap must be >= 0, got {prior_max_gap}")
+        self.prior_max_gap = int(prior_max_gap)
         self.refine = bool(refine)
         self.seed = int(seed)
         self.stereo = StereoMatcher(self.bundle.stereo_path, threads=self.threads,
@@ -315,13 +329,14 @@ class PoseEstimator:
                              views=sil.search_views, grid=sil.search_grid)
             if self._outline_points is not None and sil.search_candidates > 0 else None)
         self._lock = threading.Lock()
-        self._prior: PoseResult | None = None
+        self._prior: PoseResult | None = None   # the last valid pose (the prior) ...
+        self._prior_gap = 0                      # ... and how many frames since it
 
     # ------------------------------------------------------------------ prior
     def reset(self) -> None:
         """Forget the previous pose (the next frame runs the coarse stereo pass)."""
         with self._lock:
-            self._prior = None
+            self._prior, self._prior_gap = None, 0
 
     def _roi_hint(self):
         from .stereo_stage import RoiHint
@@ -401,9 +416,15 @@ class PoseEstimator:
                             outline_image_pixels=factor("outline_image_pixels"),
                             polish_deg=factor("polish_deg"), polish_m=factor("polish_m"),
                             decided=stage.decided if valid else None)
-        if status != "bad_input":  # a bad frame says nothing about where the target is
-            with self._lock:
-                self._prior = result
+        with self._lock:
+            if valid:
+                self._prior, self._prior_gap = result, 0
+            elif factors.get("prior_conflict"):  # decided, but half turned from the prior: trust neither
+                self._prior, self._prior_gap = None, 0
+            elif self._prior is not None:  # an invalid or bad frame: the prior ages (the target moves on)
+                self._prior_gap += 1
+                if self._prior_gap > self.prior_max_gap:
+                    self._prior, self._prior_gap = None, 0
         return result
 
     def estimate(self, left: np.ndarray, right: np.ndarray) -> PoseResult:
@@ -436,7 +457,7 @@ class PoseEstimator:
     def _register(self, xyz: np.ndarray, stage: PoseStageResult, stereo: Any, timer: StageTimer,
                   left_r: np.ndarray | None = None) -> tuple[PoseStageResult, str]:
         """Multi-start registration (:mod:`spacepose.registration`) seeded with the network's pose
-        (and the previous frame's valid pose, with ``use_prior``), each with its flip; then, with
+        (and the prior, the last valid pose, with ``use_prior``), each with its flip; then, with
         the bundle's ``silhouette`` stage, the outline (:mod:`spacepose.silhouette`).
 
         The registered pose replaces the voted one; its validity is the registration's own
@@ -456,7 +477,8 @@ class PoseEstimator:
            is on the same side and the image vote does not veto it (else ``weak_votes``): confidence
            ``inlier_fraction * (1 - exp(-margin / min_margin))``; the pose is the outline-refined
            one when that refinement fits the outline within ``max_chamfer_px``.
-        3. the previous frame's valid pose, when exactly one of the two is near it
+        3. the prior (the last valid pose, at most ``prior_max_gap`` frames back), when exactly one
+           of the two is near it
            (:func:`spacepose.registration.select_with_prior`): "tracked", confidence
            ``0.5 * inlier_fraction``. The outline-refined poses that fit within ``max_chamfer_px``
            are asked first (they are the more accurate, so they stay within the gates longer); when
@@ -464,11 +486,11 @@ class PoseEstimator:
            previous pose (if any) to fall back to when the checks after refuse it.
 
         Otherwise the frame is ``weak_votes``. A pose decided by 1 or 2 that is more than 90° from
-        the previous frame's valid pose is reported ``weak_votes`` too (one of the two is a flip,
-        and the frame alone cannot say which), which also clears the prior. Frames that are not a
-        sequence lose little: a previous frame is rarely valid, and an unrelated previous pose lies
-        within the tracking gates of one of the two candidates only by rare chance (both 20° and 1 m
-        by default).
+        the prior is reported ``weak_votes`` too (one of the two is a flip, and the frame alone
+        cannot say which), which also clears the prior. Frames that are not a sequence lose little:
+        an unrelated prior lies within the tracking gates of one of the two candidates only by rare
+        chance (both 20° and 1 m by default; the evaluation of independent frames runs without a
+        prior).
 
         With the stage's ``polish``, the pose so decided is refined once more against the outline
         (:func:`spacepose.silhouette.polish_pose`) and reported; the next frame tracks from the pose as
@@ -556,10 +578,10 @@ class PoseEstimator:
             confidence = 0.5 * reg.inlier_fraction
             factors["tracked"] = 1.0
         if not factors.get("tracked") and prior is not None and (turned := float(rotation_angle_deg(prior[0], R))) > 90.0:
-            # decided on its own, yet half turned from the previous frame's valid pose: one of the two is
+            # decided on its own, yet half turned from the prior: one of the two is
             # wrong and nothing says which; report neither, and the next frame starts without a prior
-            return _stage_invalid(stage, "weak_votes", factors), (
-                f"the pose is {turned:.0f}° from the previous frame's valid pose")
+            return _stage_invalid(stage, "weak_votes", {**factors, "prior_conflict": 1.0}), (
+                f"the pose is {turned:.0f}° from the previous valid pose")
         decided = None
         if outline is not None and sil.polish:
             with timer.stage("silhouette"):
@@ -621,7 +643,7 @@ class PoseEstimator:
                               templates=self._outline_templates)
 
     def _valid_prior(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The previous frame's pose when it was valid and ``use_prior`` is on, else ``None``."""
+        """The last valid pose, at most ``prior_max_gap`` frames back, when ``use_prior`` is on, else ``None``."""
         if not self.use_prior:
             return None
         with self._lock:

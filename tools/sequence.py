@@ -88,8 +88,10 @@ def _longest_run(flags: list[bool]) -> int:
     return best
 
 
-def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, threads: int = 2) -> dict[str, Any]:
-    """Run the estimator over the sequence in order with ``use_prior``; rows and a summary."""
+def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, threads: int = 2,
+                      prior_max_gap: int | None = None) -> dict[str, Any]:
+    """Run the estimator over the sequence in order with ``use_prior`` (and ``prior_max_gap``, default
+    the estimator's); rows and a summary."""
     from spacepose.calibration.rig import load_rig
     from spacepose.estimator import PoseEstimator
     from spacepose.imageio import read_image
@@ -98,7 +100,8 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
 
     root = Path(folder)
     records = read_pose_labels(root)
-    est = PoseEstimator(load_rig(root / "rig.yaml"), bundle=bundle, threads=threads, use_prior=True)
+    extra = {} if prior_max_gap is None else {"prior_max_gap": int(prior_max_gap)}
+    est = PoseEstimator(load_rig(root / "rig.yaml"), bundle=bundle, threads=threads, use_prior=True, **extra)
     rows = []
     for rec in records:
         res = est.estimate(read_image(root / "left" / f"{rec.frame}.png"), read_image(root / "right" / f"{rec.frame}.png"))
@@ -136,6 +139,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     e.add_argument("--bundle", type=Path, default=None)
     e.add_argument("--threads", type=int, default=2)
     e.add_argument("--json", type=Path, default=None)
+    e.add_argument("--prior-max-gap", type=int, default=None,
+                   help="frames a valid pose stays the prior without another (default: the estimator's)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     if args.cmd == "render":
@@ -143,7 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         render_sequence(args.out, args.frames, args.distance, args.rate, args.regime, args.seed, (w, h))
         print(f"wrote {args.frames} frames to {args.out}")
         return 0
-    report = evaluate_sequence(args.folder, args.bundle, args.threads)
+    report = evaluate_sequence(args.folder, args.bundle, args.threads, args.prior_max_gap)
     print("frame   status        tracked  e_t m   e_R deg")
     for row in report["frames"]:
         print(f"{row['frame']}  {row['status']:<12}  {str(row['tracked']):<7}  "

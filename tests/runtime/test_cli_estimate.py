@@ -89,3 +89,23 @@ def test_folder_without_right(setup, tmp_path, capsys):
     (tmp_path / "seq" / "left").mkdir(parents=True)
     assert main(_args(root, tmp_path / "seq", bundle, tmp_path / "p.jsonl")) == 2
     assert "right/" in capsys.readouterr().err
+
+
+def test_prior_max_gap_option(setup, tmp_path, capsys, monkeypatch):
+    root, seq, bundle = setup
+    import spacepose.estimator as est_mod
+
+    seen = []
+    real_init = est_mod.PoseEstimator.__init__
+
+    def spy(self, *args, **kwargs):
+        seen.append(kwargs.get("prior_max_gap", "default"))
+        real_init(self, *args, **kwargs)
+
+    monkeypatch.setattr(est_mod.PoseEstimator, "__init__", spy)
+    assert main(_args(root, seq, bundle, tmp_path / "a.jsonl", "--prior-max-gap", "0")) == 0
+    assert main(_args(root, seq, bundle, tmp_path / "b.jsonl")) == 0
+    assert seen == [0, "default"]
+    with pytest.raises(SystemExit):
+        main(_args(root, seq, bundle, tmp_path / "c.jsonl", "--prior-max-gap", "-1"))
+    assert ">= 0" in capsys.readouterr().err and not (tmp_path / "c.jsonl").exists()

@@ -87,10 +87,43 @@ def test_prior_skips_coarse_pass(estimator, stereo_hints):
     estimator.reset()
     estimator.estimate(left, right)
     assert hints[2] is None
-    # an invalid frame drops the prior
-    estimator.estimate(np.zeros_like(left), np.zeros_like(right))
-    estimator.estimate(left, right)
-    assert hints[-1] is None
+
+
+@pytest.mark.parametrize("gap", [0, 1, 3])
+def test_prior_outlives_up_to_gap_frames_without_a_valid_pose(bundle, gap):
+    """An eclipse (dark frames, no_target) or a bad frame ages the prior; it expires after ``prior_max_gap``."""
+    est = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, prior_max_gap=gap)
+    left, right = synthetic_pair()
+    dark = (np.zeros_like(left), np.zeros_like(right))
+    assert est.estimate(left, right).valid
+    for k in range(gap):
+        assert est.estimate(*dark).status == "no_target"
+        assert est._roi_hint() is not None, f"prior lost after {k + 1} of {gap} frames"
+    bad = est.estimate(left, right[:, :-1])                          # a bad frame counts as a frame too
+    assert bad.status == "bad_input" and est._roi_hint() is None and est._valid_prior() is None
+    assert est.estimate(left, right).valid and est._valid_prior() is not None   # a valid pose restarts it
+
+
+def test_prior_conflict_clears_the_prior(estimator, monkeypatch):
+    """A pose decided on its own but half turned from the prior: neither is trusted, the prior goes."""
+    left, right = synthetic_pair()
+    assert estimator.estimate(left, right).valid and estimator._valid_prior() is not None
+    from spacepose.estimator import _stage_invalid
+
+    real = estimator._pose_from_pair
+
+    def conflicting(left_r, right_r, hint, timer):
+        status, stage, window, detail = real(left_r, right_r, hint, timer)
+        return "weak_votes", _stage_invalid(stage, "weak_votes", {"prior_conflict": 1.0}), window, "turned"
+
+    monkeypatch.setattr(estimator, "_pose_from_pair", conflicting)
+    assert not estimator.estimate(left, right).valid
+    assert estimator._valid_prior() is None
+
+
+def test_prior_max_gap_is_checked(bundle):
+    with pytest.raises(ValueError, match="prior_max_gap"):
+        PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, prior_max_gap=-1)
 
 
 def test_prior_that_lost_the_target_falls_back_to_the_coarse_pass(estimator, stereo_hints, monkeypatch):

@@ -42,6 +42,6 @@ def test_render_and_evaluate_a_short_sequence(tmp_path, capsys):
     s = report["summary"]
     assert s["frames"] == 3 and 0 <= s["valid"] <= 3 and s["flips"] <= s["valid"]
     assert {"status", "tracked", "e_t", "e_R", "flip_margin"} <= set(report["frames"][0])
-    assert main(["eval", str(out), "--threads", "1", "--json", str(tmp_path / "r.json")]) == 0
+    assert main(["eval", str(out), "--threads", "1", "--json", str(tmp_path / "r.json"), "--prior-max-gap", "0"]) == 0
     assert json.loads((tmp_path / "r.json").read_text())["summary"]["frames"] == 3
     assert "summary:" in capsys.readouterr().out
