@@ -263,7 +263,9 @@ class PoseEstimator:
             (``tracked``).
         prior_max_gap: a valid pose stays the prior through this many following frames without one
             (an eclipse, a frame whose checks refuse its pose, a bad frame); 0: only the frame right
-            after it. The tracking gates (``registration.track_max_deg`` / ``track_max_m``) are not
+            after it. Only the frame right after a valid one takes its window from the prior: after a
+            frame without a valid pose the coarse pass looks at the whole frame again (on independent
+            frames a stale window cost valid poses). The tracking gates (``registration.track_max_deg`` / ``track_max_m``) are not
             widened for the gap, so after a longer gap the target must still be within them of the old
             pose (a flip, 180° away, never is). Measured on the five rendered sequences (session 13,
             ``python -m spacepose.tools.sequence eval``): see the model card.
@@ -341,7 +343,7 @@ class PoseEstimator:
     def _roi_hint(self):
         from .stereo_stage import RoiHint
 
-        prior = self._valid_prior()
+        prior = self._valid_prior(max_gap=0)  # a window only from the frame right before (see __init__)
         if prior is None:
             return None
         centre = prior[0] @ self.bundle.centre + prior[1]
@@ -642,13 +644,14 @@ class PoseEstimator:
                               surface=self._registration, tau_m=reg.tau_m, flip=flip, image=left_r,
                               templates=self._outline_templates)
 
-    def _valid_prior(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The last valid pose, at most ``prior_max_gap`` frames back, when ``use_prior`` is on, else ``None``."""
+    def _valid_prior(self, max_gap: int | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+        """The last valid pose, at most ``max_gap`` (default ``prior_max_gap``) frames back, when
+        ``use_prior`` is on, else ``None``."""
         if not self.use_prior:
             return None
         with self._lock:
-            prior = self._prior
-        if prior is None or not prior.valid:
+            prior, gap = self._prior, self._prior_gap
+        if prior is None or not prior.valid or gap > (self.prior_max_gap if max_gap is None else max_gap):
             return None
         R, t = prior.decided if prior.decided is not None else (prior.R, prior.t)
         return np.asarray(R), np.asarray(t)

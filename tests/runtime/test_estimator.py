@@ -96,9 +96,11 @@ def test_prior_outlives_up_to_gap_frames_without_a_valid_pose(bundle, gap):
     left, right = synthetic_pair()
     dark = (np.zeros_like(left), np.zeros_like(right))
     assert est.estimate(left, right).valid
+    assert est._roi_hint() is not None                              # the frame right after: its window
     for k in range(gap):
         assert est.estimate(*dark).status == "no_target"
-        assert est._roi_hint() is not None, f"prior lost after {k + 1} of {gap} frames"
+        assert est._valid_prior() is not None, f"prior lost after {k + 1} of {gap} frames"
+        assert est._roi_hint() is None                              # but the coarse pass looks again
     bad = est.estimate(left, right[:, :-1])                          # a bad frame counts as a frame too
     assert bad.status == "bad_input" and est._roi_hint() is None and est._valid_prior() is None
     assert est.estimate(left, right).valid and est._valid_prior() is not None   # a valid pose restarts it
