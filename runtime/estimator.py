@@ -94,7 +94,7 @@ class PoseResult:
             registration). Not part of the JSON line.
         tracked: the pose was decided by the prior, the last valid pose at most ``prior_max_gap``
             frames back (registration with ``use_prior``: the frame alone could not tell the pose
-            from its flip). Not part of the JSON line.
+            from its flip). In the JSON line since session 13 (a key beyond the CONVENTIONS.md ones).
         outline_chamfer_px, outline_margin_px: with the bundle's ``silhouette`` stage, the chamfer
             distance (outline px: pixels of a ``max_side_px`` view of the stereo window) of the best outline-refined pose to the outline the stereo
             disparity shows, and the gap to the best pose more than 90° from it
@@ -151,6 +151,7 @@ class PoseResult:
             "timings_ms": {k: round(float(v), 3) for k, v in self.timings_ms.items()},
             "n_points": int(self.n_points),
             "roi": None if self.roi is None else [int(v) for v in self.roi],
+            "tracked": bool(self.tracked),
         })
         if self.detail:
             out["detail"] = self.detail

@@ -56,7 +56,7 @@ def test_every_frame_gets_a_line(setup, tmp_path, capsys):
     assert status["000003.png"] == (False, "no_target")
     assert status["000004.png"][0] is True
     for r in records:
-        assert set(r) >= {"frame", "valid", "status", "R", "t", "q_wxyz", "confidence", "timings_ms"}
+        assert set(r) >= {"frame", "valid", "status", "R", "t", "q_wxyz", "confidence", "timings_ms", "tracked"}
         assert len(r["R"]) == 3 and len(r["t"]) == 3 and len(r["q_wxyz"]) == 4
     rows = list(csv.reader((tmp_path / "p.csv").open()))
     assert rows[0][:3] == ["frame", "valid", "status"] and len(rows) == 6

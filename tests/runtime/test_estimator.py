@@ -44,7 +44,7 @@ def test_end_to_end_valid_pose(estimator):
     assert 0.0 < res.network_ms <= res.timings_ms["stereo"] + res.timings_ms["pose_net"]
     assert res.n_points > 32 and res.roi is not None
     record = res.to_dict("000001.png")
-    assert record["frame"] == "000001.png" and record["valid"] is True
+    assert record["frame"] == "000001.png" and record["valid"] is True and record["tracked"] is False
     assert set(record) >= {"frame", "valid", "status", "R", "t", "q_wxyz", "confidence", "timings_ms"}
     # both graphs have fixed input sizes: their sessions keep onnxruntime's memory arena
     assert estimator.stereo.session.get_session_options().enable_cpu_mem_arena
