@@ -33,3 +33,23 @@ def test_cli_help_lists_every_command_without_torch():
         assert command in out.stdout
     loaded = _loaded_after("from spacepose.cli import build_parser\nbuild_parser()")
     assert not any(m.split(".")[0] == "torch" for m in loaded)
+
+
+#: the device machine receives the working tree (tracked files) in at most 64 MiB, with what a job
+#: carries on top (see the model card's "Training on a lent accelerator"); keep room for that
+TREE_LIMIT_BYTES = 56 * 2**20
+
+
+def test_tracked_files_fit_the_device_transfer():
+    import shutil
+
+    import pytest
+
+    root = RUNTIME.parent
+    if shutil.which("git") is None or not (root / ".git").exists():
+        pytest.skip("not a git checkout")
+    out = subprocess.run(["git", "ls-files", "-z"], cwd=root, capture_output=True, check=True, timeout=60).stdout
+    files = [root / name for name in out.decode().split("\0") if name]
+    total = sum(f.stat().st_size for f in files if f.is_file())
+    biggest = sorted(((f.stat().st_size, f.relative_to(root)) for f in files if f.is_file()), reverse=True)[:5]
+    assert total <= TREE_LIMIT_BYTES, f"tracked files take {total / 2**20:.1f} MiB; the biggest: {biggest}"
