@@ -246,7 +246,9 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
         if overlay_dir is not None and i < overlays:
             img = draw_box_overlay(left, K, model.bbox_corners,
                                    [(rec.R, rec.t, (255, 255, 255)), (result.R, result.t, (0, 255, 0))])
-            write_image(overlay_dir / f"{rec.frame}.png", img)
+            # JPEG: a 1280x960 overlay is ~1.3 MB as PNG, ~0.2 MB as JPEG; reports are committed, and the
+            # working tree must stay under the device machine's transfer limit
+            write_image(overlay_dir / f"{rec.frame}.jpg", img, jpeg_quality=90)
         if progress:
             progress(i + 1, len(records))
     return {"dataset": str(root), "bundle": str(model.path), "split": split, "refine": bool(refine), "frames": rows,
