@@ -40,7 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-prior", action="store_true",
                         help="no prior between frames: the coarse stereo pass on every frame, no tracking")
     parser.add_argument("--prior-max-gap", type=non_negative_int, default=None, metavar="N",
-                        help="frames a valid pose stays the prior while none is valid (default: the estimator's, 5)")
+                        help="frames a valid pose stays the prior while none is valid (default 0: the next frame only; "
+                             "more keeps more chains but also more wrong poses, see the model card)")
     parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
 
 
