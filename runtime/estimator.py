@@ -497,8 +497,8 @@ class PoseEstimator:
         cannot say which), which also clears the prior. Frames that are not a sequence lose a little:
         an unrelated prior lies within the tracking gates of one of the two candidates only by rare
         chance (both 20° and 1 m by default), but a pose decided more than 90° from it is refused
-        (session 13's profile of 29 independent frames: 7 valid instead of 8). Run them without a
-        prior, as the evaluation of independent frames does.
+        (with ``prior_max_gap`` 5, session 13's profile of 29 independent frames kept 7 valid
+        instead of 8). Run them without a prior, as the evaluation of independent frames does.
 
         With the stage's ``polish``, the pose so decided is refined once more against the outline
         (:func:`spacepose.silhouette.polish_pose`) and reported; the next frame tracks from the pose as
