@@ -264,8 +264,8 @@ class PoseEstimator:
             (skips the coarse stereo pass), and let it decide between a registered pose and its flip
             (``tracked``).
         prior_max_gap: a valid pose stays the prior through this many following frames without one
-            (an eclipse, a frame whose checks refuse its pose, a bad frame); 0: only the frame right
-            after it. Only the frame right after a valid one takes its window from the prior: after a
+            (an eclipse, a frame whose checks refuse its pose; a ``bad_input`` frame does not count and
+            leaves the prior as it was); 0: only the frame right after it. Only the frame right after a valid one takes its window from the prior: after a
             frame without a valid pose the coarse pass looks at the whole frame again (on independent
             frames a stale window cost valid poses). The tracking gates
             (``registration.track_max_deg`` / ``track_max_m``) are not widened for the gap, so after a
@@ -423,12 +423,14 @@ class PoseEstimator:
                             outline_image_pixels=factor("outline_image_pixels"),
                             polish_deg=factor("polish_deg"), polish_m=factor("polish_m"),
                             decided=stage.decided if valid else None)
+        if status == "bad_input":  # a bad frame says nothing about where the target is: the prior stays as it was
+            return result
         with self._lock:
             if valid:
                 self._prior, self._prior_gap = result, 0
             elif factors.get("prior_conflict"):  # decided, but half turned from the prior: trust neither
                 self._prior, self._prior_gap = None, 0
-            elif self._prior is not None:  # an invalid or bad frame: the prior ages (the target moves on)
+            elif self._prior is not None:  # a frame without a valid pose: the prior ages (the target moves on)
                 self._prior_gap += 1
                 if self._prior_gap > self.prior_max_gap:
                     self._prior, self._prior_gap = None, 0

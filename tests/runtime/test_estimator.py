@@ -91,7 +91,8 @@ def test_prior_skips_coarse_pass(estimator, stereo_hints):
 
 @pytest.mark.parametrize("gap", [0, 1, 3])
 def test_prior_outlives_up_to_gap_frames_without_a_valid_pose(bundle, gap):
-    """An eclipse (dark frames, no_target) or a bad frame ages the prior; it expires after ``prior_max_gap``."""
+    """An eclipse (dark frames, no_target) ages the prior; it expires after ``prior_max_gap`` such frames. A
+    bad frame (bad_input) leaves it as it was."""
     est = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, prior_max_gap=gap)
     left, right = synthetic_pair()
     dark = (np.zeros_like(left), np.zeros_like(right))
@@ -101,9 +102,18 @@ def test_prior_outlives_up_to_gap_frames_without_a_valid_pose(bundle, gap):
         assert est.estimate(*dark).status == "no_target"
         assert est._valid_prior() is not None, f"prior lost after {k + 1} of {gap} frames"
         assert est._roi_hint() is None                              # but the coarse pass looks again
-    bad = est.estimate(left, right[:, :-1])                          # a bad frame counts as a frame too
-    assert bad.status == "bad_input" and est._roi_hint() is None and est._valid_prior() is None
+    bad = est.estimate(left, right[:, :-1])                          # a bad frame does not count
+    assert bad.status == "bad_input" and est._valid_prior() is not None
+    assert est.estimate(*dark).status == "no_target"                # one frame more than the gap: gone
+    assert est._roi_hint() is None and est._valid_prior() is None
     assert est.estimate(left, right).valid and est._valid_prior() is not None   # a valid pose restarts it
+
+
+def test_a_bad_frame_keeps_the_window(estimator):
+    left, right = synthetic_pair()
+    assert estimator.estimate(left, right).valid
+    assert estimator.estimate(left, right[:, :-1]).status == "bad_input"
+    assert estimator._roi_hint() is not None                         # as before session 13
 
 
 def test_prior_conflict_clears_the_prior(estimator, monkeypatch):
