@@ -44,31 +44,49 @@ __all__ = ["Conv3dAs2d", "ConvTranspose3dAs2d", "NarrowConv3dAs2d", "rewrite_con
 MIN_OUT_CHANNELS = 8
 
 
-class Conv3dAs2d(nn.Module):
-    """The map of ``conv`` (an ``nn.Conv3d`` with zero padding given as numbers and no dilation):
-    (B, C, D, H, W) -> (B, C_out, D', H', W'), computed with ``k_d`` grouped ``Conv2d`` calls."""
+def _expressible(module: nn.Module) -> bool:
+    """Zero padding given as numbers and no dilation: what the 2-D forms below can express."""
+    return (not isinstance(module.padding, str) and module.padding_mode == "zeros"
+            and tuple(module.dilation) == (1, 1, 1))
 
-    def __init__(self, conv: nn.Conv3d) -> None:
+
+class _DepthTaps(nn.Module):
+    """What the 2-D forms share: a 3-D (transposed) convolution's depth kernel size, stride, padding,
+    groups and out channels, and its weight and bias, kept in the original layout (the state dict is
+    the original's; tap j is ``weight[:, :, j]``)."""
+
+    def __init__(self, conv: nn.Conv3d | nn.ConvTranspose3d) -> None:
         super().__init__()
-        if conv.dilation != (1, 1, 1) or conv.padding_mode != "zeros" or isinstance(conv.padding, str):
-            raise ValueError("Conv3dAs2d needs zero padding given as numbers and no dilation")
-        weight = conv.weight.detach()                                  # (C_out, C_in / g, kd, kh, kw)
+        if not _expressible(conv):
+            raise ValueError(f"{type(self).__name__} needs zero padding given as numbers and no dilation")
+        weight = conv.weight.detach()
         self.kd = int(weight.shape[2])
         self.stride = tuple(int(s) for s in conv.stride)
         self.padding = tuple(int(p) for p in conv.padding)
         self.groups = int(conv.groups)
-        self.out_channels = int(weight.shape[0])
-        # kept in the Conv3d layout, so the state dict is the original's; tap j is weight[:, :, j]
+        self.out_channels = int(conv.out_channels)
         self.weight = nn.Parameter(weight.clone(), requires_grad=False)
         self.bias = None if conv.bias is None else nn.Parameter(conv.bias.detach().clone(), requires_grad=False)
+
+    def _depth_first(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, C, D, H, W) -> (B, D + 2 p_d, C, H, W), zero-padded in depth."""
+        pd = self.padding[0]
+        xt = x.transpose(1, 2)
+        return F.pad(xt, (0, 0, 0, 0, 0, 0, pd, pd)) if pd else xt
+
+
+class Conv3dAs2d(_DepthTaps):
+    """The map of ``conv`` (an ``nn.Conv3d`` with zero padding given as numbers and no dilation):
+    (B, C, D, H, W) -> (B, C_out, D', H', W'), computed with ``k_d`` grouped ``Conv2d`` calls."""
+
+    def __init__(self, conv: nn.Conv3d) -> None:
+        super().__init__(conv)                                          # weight (C_out, C_in / g, kd, kh, kw)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         b, c, d, h, w = x.shape
         pd, ph, pw = self.padding
         sd, sh, sw = self.stride
-        xt = x.transpose(1, 2)                                         # (B, D, C, H, W)
-        if pd:
-            xt = F.pad(xt, (0, 0, 0, 0, 0, 0, pd, pd))
+        xt = self._depth_first(x)                                      # (B, D + 2 pd, C, H, W)
         d_out = (d + 2 * pd - self.kd) // sd + 1
         out = None
         for j in range(self.kd):
@@ -78,7 +96,7 @@ class Conv3dAs2d(nn.Module):
         return out.reshape((b, d_out, self.out_channels) + tuple(out.shape[-2:])).transpose(1, 2)
 
 
-class ConvTranspose3dAs2d(nn.Module):
+class ConvTranspose3dAs2d(_DepthTaps):
     """The map of ``conv`` (an ``nn.ConvTranspose3d`` with zero padding and no dilation):
     (B, C, D, H, W) -> (B, C_out, D', H', W') with D' = (D - 1) s_d - 2 p_d + k_d + op_d, computed with
     ``k_d`` grouped ``ConvTranspose2d`` calls.
@@ -89,17 +107,8 @@ class ConvTranspose3dAs2d(nn.Module):
     """
 
     def __init__(self, conv: nn.ConvTranspose3d) -> None:
-        super().__init__()
-        if conv.dilation != (1, 1, 1) or conv.padding_mode != "zeros" or isinstance(conv.padding, str):
-            raise ValueError("ConvTranspose3dAs2d needs zero padding given as numbers and no dilation")
-        weight = conv.weight.detach()                                  # (C_in, C_out / g, kd, kh, kw)
-        self.kd = int(weight.shape[2])
-        self.stride = tuple(int(s) for s in conv.stride)
-        self.padding = tuple(int(p) for p in conv.padding)
+        super().__init__(conv)                                          # weight (C_in, C_out / g, kd, kh, kw)
         self.output_padding = tuple(int(p) for p in conv.output_padding)
-        self.groups = int(conv.groups)
-        self.weight = nn.Parameter(weight.clone(), requires_grad=False)   # the ConvTranspose3d layout
-        self.bias = None if conv.bias is None else nn.Parameter(conv.bias.detach().clone(), requires_grad=False)
 
     @staticmethod
     def _shifted(y: torch.Tensor, shift: int, length: int) -> torch.Tensor | None:
@@ -145,7 +154,7 @@ class ConvTranspose3dAs2d(nn.Module):
         return out if self.bias is None else out + self.bias.reshape(1, -1, 1, 1, 1)
 
 
-class NarrowConv3dAs2d(nn.Module):
+class NarrowConv3dAs2d(_DepthTaps):
     """The map of ``conv`` (an ungrouped ``nn.Conv3d`` with few outputs, zero padding, no dilation):
     (B, C, D, H, W) -> (B, C_out, D', H', W'), computed with one ``Conv2d`` whose ``k_d * C_out``
     outputs are the depth taps, over every (padded) input slice; output slice o sums tap j of input
@@ -153,26 +162,15 @@ class NarrowConv3dAs2d(nn.Module):
     instead of 5.3 ms (2 threads, session 13 scratch timing)."""
 
     def __init__(self, conv: nn.Conv3d) -> None:
-        super().__init__()
-        if conv.dilation != (1, 1, 1) or conv.padding_mode != "zeros" or isinstance(conv.padding, str):
-            raise ValueError("NarrowConv3dAs2d needs zero padding given as numbers and no dilation")
         if conv.groups != 1:
             raise ValueError("NarrowConv3dAs2d needs an ungrouped convolution")
-        weight = conv.weight.detach()                                  # (C_out, C_in, kd, kh, kw)
-        self.kd = int(weight.shape[2])
-        self.stride = tuple(int(s) for s in conv.stride)
-        self.padding = tuple(int(p) for p in conv.padding)
-        self.out_channels = int(weight.shape[0])
-        self.weight = nn.Parameter(weight.clone(), requires_grad=False)   # the Conv3d layout (state dict)
-        self.bias = None if conv.bias is None else nn.Parameter(conv.bias.detach().clone(), requires_grad=False)
+        super().__init__(conv)                                          # weight (C_out, C_in, kd, kh, kw)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         b, c, d, h, w = x.shape
         pd, ph, pw = self.padding
         sd, sh, sw = self.stride
-        xt = x.transpose(1, 2)                                         # (B, D, C, H, W)
-        if pd:
-            xt = F.pad(xt, (0, 0, 0, 0, 0, 0, pd, pd))
+        xt = self._depth_first(x)                                      # (B, D + 2 pd, C, H, W)
         dp = d + 2 * pd
         d_out = (dp - self.kd) // sd + 1
         c_in, kh, kw = self.weight.shape[1], self.weight.shape[3], self.weight.shape[4]
@@ -191,23 +189,20 @@ def wants_narrow_rewrite(module: nn.Module) -> bool:
     """True for the Conv3d layers ``rewrite_conv3d(..., narrow=True)`` gives to :class:`NarrowConv3dAs2d`:
     ungrouped, fewer than :data:`MIN_OUT_CHANNELS` outputs, a kernel deeper than 1, zero padding given
     as numbers, no dilation."""
-    return (isinstance(module, nn.Conv3d) and not isinstance(module.padding, str)
-            and module.padding_mode == "zeros" and module.dilation == (1, 1, 1) and module.groups == 1
+    return (isinstance(module, nn.Conv3d) and _expressible(module) and module.groups == 1
             and module.out_channels < MIN_OUT_CHANNELS and module.kernel_size[0] > 1)
 
 
 def wants_transposed_rewrite(module: nn.Module) -> bool:
     """True for the ConvTranspose3d layers ``rewrite_conv3d(..., transposed=True)`` replaces: zero
     padding given as numbers, no dilation."""
-    return (isinstance(module, nn.ConvTranspose3d) and not isinstance(module.padding, str)
-            and module.padding_mode == "zeros" and module.dilation == (1, 1, 1))
+    return isinstance(module, nn.ConvTranspose3d) and _expressible(module)
 
 
 def wants_rewrite(module: nn.Module) -> bool:
     """True for the Conv3d layers :func:`rewrite_conv3d` replaces: a kernel wider than 1x1x1 (or a depth
     stride), at least :data:`MIN_OUT_CHANNELS` outputs, zero padding given as numbers, no dilation."""
-    return (isinstance(module, nn.Conv3d) and not isinstance(module.padding, str)
-            and module.padding_mode == "zeros" and module.dilation == (1, 1, 1)
+    return (isinstance(module, nn.Conv3d) and _expressible(module)
             and module.out_channels >= MIN_OUT_CHANNELS
             and (module.kernel_size != (1, 1, 1) or module.stride[0] > 1))
 
