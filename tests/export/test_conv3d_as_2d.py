@@ -30,32 +30,45 @@ def _conv(c_in, c_out, k, s, p, g, bias, seed=0):
     return nn.Conv3d(c_in, c_out, k, s, p, groups=g, bias=bias).eval()
 
 
+def _assert_same_in_torch(conv, rewritten, x):
+    """``rewritten`` (a 2-D form of ``conv``) computes what ``conv`` computes on ``x``, shape included."""
+    with torch.no_grad():
+        want, got = conv(x), rewritten(x)
+    assert got.shape == want.shape
+    assert float(torch.max(torch.abs(got - want))) < 1e-5
+
+
+def _assert_same_in_onnxruntime(conv, rewritten, x):
+    """``rewritten`` exported to ONNX computes in onnxruntime what ``conv`` computes in torch; returns
+    the exported graph (for the callers' checks of its operators)."""
+    buf = io.BytesIO()
+    torch.onnx.export(rewritten, (x,), buf, opset_version=17, dynamo=False, input_names=["x"])
+    (got,) = ort.InferenceSession(buf.getvalue(), providers=["CPUExecutionProvider"]).run(None, {"x": x.numpy()})
+    with torch.no_grad():
+        want = conv(x).numpy()
+    assert got.shape == want.shape and np.max(np.abs(got - want)) < 1e-5
+    return onnx.load_from_string(buf.getvalue())
+
+
+def _kernels(proto, op_type):
+    return [list(next(a.ints for a in n.attribute if a.name == "kernel_shape"))
+            for n in proto.graph.node if n.op_type == op_type]
+
+
 @pytest.mark.parametrize("case", CASES, ids=lambda c: f"k{c[2]}s{c[3]}g{c[5]}")
 def test_matches_conv3d_in_torch(case):
     *args, shape = case
     conv = _conv(*args)
-    x = torch.randn(shape)
-    with torch.no_grad():
-        want, got = conv(x), Conv3dAs2d(conv)(x)
-    assert got.shape == want.shape
-    assert float(torch.max(torch.abs(got - want))) < 1e-5
+    _assert_same_in_torch(conv, Conv3dAs2d(conv), torch.randn(shape))
 
 
 @pytest.mark.parametrize("case", CASES[:3], ids=lambda c: f"k{c[2]}s{c[3]}g{c[5]}")
 def test_matches_conv3d_in_onnxruntime(case):
     *args, shape = case
     conv = _conv(*args, seed=1)
-    x = torch.randn(shape)
-    buf = io.BytesIO()
-    torch.onnx.export(Conv3dAs2d(conv), (x,), buf, opset_version=17, dynamo=False, input_names=["x"])
-    proto = onnx.load_from_string(buf.getvalue())
-    assert {n.op_type for n in proto.graph.node} >= {"Conv"}
-    assert all(len(next(a.ints for a in n.attribute if a.name == "kernel_shape")) == 2
-               for n in proto.graph.node if n.op_type == "Conv")          # only 2-D convolutions left
-    (got,) = ort.InferenceSession(buf.getvalue(), providers=["CPUExecutionProvider"]).run(None, {"x": x.numpy()})
-    with torch.no_grad():
-        want = conv(x).numpy()
-    assert np.max(np.abs(got - want)) < 1e-5
+    proto = _assert_same_in_onnxruntime(conv, Conv3dAs2d(conv), torch.randn(shape))
+    kernels = _kernels(proto, "Conv")
+    assert kernels and all(len(k) == 2 for k in kernels)                    # only 2-D convolutions left
 
 
 def test_rewrite_replaces_only_the_layers_it_speeds_up():
@@ -123,28 +136,16 @@ def _transposed(c_in, c_out, k, s, p, op, g, bias, seed=0):
 def test_matches_conv_transpose3d_in_torch(case):
     *args, shape = case
     conv = _transposed(*args)
-    x = torch.randn(shape)
-    with torch.no_grad():
-        want, got = conv(x), ConvTranspose3dAs2d(conv)(x)
-    assert got.shape == want.shape
-    assert float(torch.max(torch.abs(got - want))) < 1e-5
+    _assert_same_in_torch(conv, ConvTranspose3dAs2d(conv), torch.randn(shape))
 
 
 @pytest.mark.parametrize("case", TRANSPOSED[:3], ids=lambda c: f"k{c[2]}s{c[3]}p{c[4]}g{c[6]}")
 def test_matches_conv_transpose3d_in_onnxruntime(case):
     *args, shape = case
     conv = _transposed(*args, seed=2)
-    x = torch.randn(shape)
-    buf = io.BytesIO()
-    torch.onnx.export(ConvTranspose3dAs2d(conv), (x,), buf, opset_version=17, dynamo=False, input_names=["x"])
-    proto = onnx.load_from_string(buf.getvalue())
-    kernels = [next(a.ints for a in n.attribute if a.name == "kernel_shape")
-               for n in proto.graph.node if n.op_type == "ConvTranspose"]
+    proto = _assert_same_in_onnxruntime(conv, ConvTranspose3dAs2d(conv), torch.randn(shape))
+    kernels = _kernels(proto, "ConvTranspose")
     assert kernels and all(len(k) == 2 for k in kernels)                    # only 2-D ones left
-    (got,) = ort.InferenceSession(buf.getvalue(), providers=["CPUExecutionProvider"]).run(None, {"x": x.numpy()})
-    with torch.no_grad():
-        want = conv(x).numpy()
-    assert got.shape == want.shape and np.max(np.abs(got - want)) < 1e-5
 
 
 def test_transposed_rewrite_is_opt_in_and_folds_batchnorm():
@@ -188,15 +189,9 @@ def test_narrow_matches_conv3d_in_torch_and_onnxruntime(case):
     torch.manual_seed(5)
     conv = nn.Conv3d(c_in, c_out, k, s, p, bias=bias).eval()
     x = torch.randn(shape)
-    with torch.no_grad():
-        want, got = conv(x), NarrowConv3dAs2d(conv)(x)
-    assert got.shape == want.shape and float(torch.max(torch.abs(got - want))) < 1e-5
-    buf = io.BytesIO()
-    torch.onnx.export(NarrowConv3dAs2d(conv), (x,), buf, opset_version=17, dynamo=False, input_names=["x"])
-    convs = [n for n in onnx.load_from_string(buf.getvalue()).graph.node if n.op_type == "Conv"]
-    assert len(convs) == 1 and len(next(a.ints for a in convs[0].attribute if a.name == "kernel_shape")) == 2
-    (out,) = ort.InferenceSession(buf.getvalue(), providers=["CPUExecutionProvider"]).run(None, {"x": x.numpy()})
-    assert np.max(np.abs(out - want.numpy())) < 1e-5
+    _assert_same_in_torch(conv, NarrowConv3dAs2d(conv), x)
+    kernels = _kernels(_assert_same_in_onnxruntime(conv, NarrowConv3dAs2d(conv), x), "Conv")
+    assert len(kernels) == 1 and len(kernels[0]) == 2                      # one 2-D convolution
 
 
 def test_narrow_rewrite_is_opt_in():

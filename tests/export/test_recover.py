@@ -1,12 +1,17 @@
 """Weights recovered from an exported graph reproduce it, and fine-tune with frozen BatchNorms."""
 
 import dataclasses
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
 onnx = pytest.importorskip("onnx")
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # --import-mode=importlib: find the helpers
+from _export_fixtures import TINY_POSE_NET, randomise_batchnorm  # noqa: E402
 
 from spacepose.errors import SpaceposeError  # noqa: E402
 from spacepose.export import onnx_pose, onnx_stereo  # noqa: E402
@@ -19,21 +24,6 @@ from spacepose.models.stereo_config import StereoConfig  # noqa: E402
 from spacepose.models.tsca_stereo import TSCAStereo  # noqa: E402
 
 SIZE, ITERS = (64, 32), 2
-NET = PoseNetConfig(crop_size=(64, 64), n_points=128, k=8, n_levels=2, ratio=4, rgb_stem=8, rgb_widths=(16, 16),
-                    rgb_bottleneck=16, rgb_out=8, point_stem=8, point_widths=(16, 16), point_bottleneck=16, head_width=16)
-
-
-def _randomise_batchnorm(model, seed):
-    """Non-trivial BatchNorm statistics, as after training (folding then changes the conv weights)."""
-    gen = torch.Generator().manual_seed(seed)
-    with torch.no_grad():
-        for m in model.modules():
-            if isinstance(m, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d, torch.nn.BatchNorm3d)):
-                m.weight.copy_(0.5 + torch.rand(m.weight.shape, generator=gen))
-                m.bias.copy_(0.2 * torch.randn(m.bias.shape, generator=gen))
-                m.running_mean.copy_(0.3 * torch.randn(m.running_mean.shape, generator=gen))
-                m.running_var.copy_(0.5 + torch.rand(m.running_var.shape, generator=gen))
-    return model.eval()
 
 
 def _export_stereo(model, path):
@@ -44,7 +34,7 @@ def _export_stereo(model, path):
 def stereo_graph(tmp_path_factory):
     torch.manual_seed(0)
     cfg = StereoConfig.cpu()
-    model = _randomise_batchnorm(TSCAStereo(cfg), 1)
+    model = randomise_batchnorm(TSCAStereo(cfg), 1)
     path = tmp_path_factory.mktemp("rec") / "stereo.onnx"
     meta = stereo_metadata(input_size=SIZE, iters=ITERS, stereo_config=cfg.to_dict(), dataset={"seed": 1, "size": 4},
                            extra={"training": {"step": 33}})
@@ -82,10 +72,10 @@ def test_recover_rejects_another_architecture(stereo_graph):
 
 def test_pose_weights_come_back(tmp_path):
     torch.manual_seed(0)
-    original = _randomise_batchnorm(PoseNet(NET), 2)
+    original = randomise_batchnorm(PoseNet(TINY_POSE_NET), 2)
     path = onnx_pose.export_pose(original, tmp_path / "pose.onnx", metadata={})
     torch.manual_seed(5)
-    model = PoseNet(NET).eval()
+    model = PoseNet(TINY_POSE_NET).eval()
     report = recover_state_dict(model, path, lambda m, p: onnx_pose.export_pose(m, p, metadata={}, force=True))
     assert report.missing == () and report.folded_bn
     assert onnx_pose.parity_check(model, path)["max"] < 1e-4
@@ -93,7 +83,7 @@ def test_pose_weights_come_back(tmp_path):
 
 def test_frozen_batchnorm_keeps_running_statistics_in_training():
     torch.manual_seed(0)
-    model = _randomise_batchnorm(PoseNet(NET), 3)
+    model = randomise_batchnorm(PoseNet(TINY_POSE_NET), 3)
     keys = list(model.state_dict())
     assert freeze_batchnorm(model) > 0
     model.train()
@@ -126,7 +116,7 @@ def test_checkpoint_from_graph_without_conv_rewrite(tmp_path, convs):
     (convs-only: the shipped graphs of sessions 6-12), still recover."""
     torch.manual_seed(0)
     cfg = StereoConfig.cpu()
-    model = _randomise_batchnorm(TSCAStereo(cfg), 6)
+    model = randomise_batchnorm(TSCAStereo(cfg), 6)
     meta = stereo_metadata(input_size=SIZE, iters=ITERS, stereo_config=cfg.to_dict(), dataset={"seed": 1, "size": 4})
     path = onnx_stereo.export_stereo(model, tmp_path / "plain.onnx", size=SIZE, iters=ITERS, metadata=meta,
                                      rewrite_convs=convs, rewrite_transposed=False, rewrite_narrow=False)
@@ -160,7 +150,7 @@ def test_graph_from_older_export_code_pairs_by_node_name(tmp_path, monkeypatch):
 
     torch.manual_seed(0)
     cfg = StereoConfig.cpu()
-    model = _randomise_batchnorm(TSCAStereo(cfg), 7)
+    model = randomise_batchnorm(TSCAStereo(cfg), 7)
     with monkeypatch.context() as patch:
         patch.setattr(tsca, "GeometryLookup", OlderLookup)
         path = onnx_stereo.export_stereo(model, tmp_path / "older.onnx", size=SIZE, iters=ITERS, metadata={})
@@ -173,15 +163,15 @@ def test_graph_from_older_export_code_pairs_by_node_name(tmp_path, monkeypatch):
 
 def test_checkpoint_from_pose_graph_keeps_target(tmp_path):
     torch.manual_seed(0)
-    model = _randomise_batchnorm(PoseNet(NET), 4)
+    model = randomise_batchnorm(PoseNet(TINY_POSE_NET), 4)
     kp = np.random.default_rng(0).uniform(-2, 2, size=(8, 3))
-    meta = onnx_pose.pose_metadata(NET, keypoints=kp, centre=np.zeros(3), target="tdrs", extra={"training": {"step": 9}})
+    meta = onnx_pose.pose_metadata(TINY_POSE_NET, keypoints=kp, centre=np.zeros(3), target="tdrs", extra={"training": {"step": 9}})
     path = onnx_pose.export_pose(model, tmp_path / "pose.onnx", metadata=meta)
     ckpt = checkpoint_from_graph(path)
     assert ckpt["kind"] == "pose" and ckpt["target"] == "tdrs" and ckpt["step"] == 9
     assert np.allclose(ckpt["keypoints"], kp)
-    assert PoseNetConfig.from_dict(ckpt["net_config"]) == NET
-    assert dataclasses.asdict(NET) == ckpt["net_config"]
+    assert PoseNetConfig.from_dict(ckpt["net_config"]) == TINY_POSE_NET
+    assert dataclasses.asdict(TINY_POSE_NET) == ckpt["net_config"]
 
 
 def test_checkpoint_from_graph_rejects_foreign_graph(tmp_path):

@@ -1,16 +1,21 @@
 """``spacepose reexport``: a graph from an older exporter comes back in the current form, same function."""
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
 onnx = pytest.importorskip("onnx")
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # --import-mode=importlib: find the helpers
+from _export_fixtures import TINY_POSE_NET, randomise_batchnorm  # noqa: E402
+
 from spacepose.errors import SpaceposeError  # noqa: E402
 from spacepose.export import onnx_pose, onnx_stereo  # noqa: E402
 from spacepose.export.metadata import stereo_metadata  # noqa: E402
 from spacepose.export.reexport import reexport_graph  # noqa: E402
-from spacepose.models.pose_config import PoseNetConfig  # noqa: E402
 from spacepose.models.pose_net import PoseNet  # noqa: E402
 from spacepose.models.stereo_config import StereoConfig  # noqa: E402
 from spacepose.models.tsca_stereo import TSCAStereo  # noqa: E402
@@ -19,24 +24,13 @@ from spacepose.onnx_session import make_session, read_metadata  # noqa: E402
 SIZE, ITERS = (64, 32), 2
 
 
-def _trained_like(model, seed):
-    gen = torch.Generator().manual_seed(seed)
-    with torch.no_grad():
-        for m in model.modules():
-            if isinstance(m, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d, torch.nn.BatchNorm3d)):
-                m.weight.copy_(0.5 + torch.rand(m.weight.shape, generator=gen))
-                m.bias.copy_(0.2 * torch.randn(m.bias.shape, generator=gen))
-                m.running_mean.copy_(0.3 * torch.randn(m.running_mean.shape, generator=gen))
-                m.running_var.copy_(0.5 + torch.rand(m.running_var.shape, generator=gen))
-    return model.eval()
-
 
 @pytest.fixture(scope="module")
 def old_stereo(tmp_path_factory):
     """A stereo graph as sessions 6-12 exported it: 3-D ConvTranspose layers and their BatchNorms."""
     torch.manual_seed(0)
     cfg = StereoConfig.cpu()
-    model = _trained_like(TSCAStereo(cfg), 3)
+    model = randomise_batchnorm(TSCAStereo(cfg), 3)
     meta = stereo_metadata(input_size=SIZE, iters=ITERS, stereo_config=cfg.to_dict(), dataset={"seed": 5, "size": 9},
                            metrics={"epe": 1.25}, extra={"training": {"step": 77}})
     path = tmp_path_factory.mktemp("old") / "stereo.onnx"
@@ -87,11 +81,9 @@ def test_refuses_to_overwrite(old_stereo, tmp_path):
 
 
 def test_pose_graph_comes_back(tmp_path):
-    net = PoseNetConfig(crop_size=(64, 64), n_points=128, k=8, n_levels=2, ratio=4, rgb_stem=8, rgb_widths=(16, 16),
-                        rgb_bottleneck=16, rgb_out=8, point_stem=8, point_widths=(16, 16), point_bottleneck=16,
-                        head_width=16)
+    net = TINY_POSE_NET
     torch.manual_seed(0)
-    model = _trained_like(PoseNet(net), 4)
+    model = randomise_batchnorm(PoseNet(net), 4)
     kp = np.random.default_rng(0).uniform(-2, 2, size=(8, 3))
     meta = onnx_pose.pose_metadata(net, keypoints=kp, centre=np.zeros(3), target="tdrs")
     path = onnx_pose.export_pose(model, tmp_path / "pose.onnx", metadata=meta)
