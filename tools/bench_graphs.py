@@ -136,12 +136,17 @@ def run_rounds(jobs: list[tuple[str, str, dict[str, Any]]], child, rounds: int) 
     return rows
 
 
+def _torch_row(rows: list[dict[str, Any]], graph: str) -> dict[str, Any] | None:
+    """The torch eager row of ``graph`` that has timings, if any."""
+    return next((x for x in rows if x["graph"] == graph and x["backend"].startswith("torch") and "median_ms" in x),
+                None)
+
+
 def add_round_speedups(rows: list[dict[str, Any]]) -> None:
     """Set ``row["round_speedups"]``: per round, torch eager's median over the row's (same graph), for
     rows that ran every round, as torch did."""
     for r in rows:
-        torch_row = next((x for x in rows if x["graph"] == r["graph"] and x["backend"].startswith("torch")
-                          and "median_ms" in x), None)
+        torch_row = _torch_row(rows, r["graph"])
         if torch_row is not None and "median_ms" in r and len(r["round_medians_ms"]) == len(torch_row["round_medians_ms"]):
             r["round_speedups"] = [t / m for t, m in zip(torch_row["round_medians_ms"], r["round_medians_ms"])]
 
@@ -201,8 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     lines = ["| graph | backend | calls | median ms | p95 ms | torch eager / this (median) | round medians ms "
              "| per-round speed-ups (median) |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        torch_row = next((x for x in rows if x["graph"] == r["graph"] and x["backend"].startswith("torch")
-                          and "median_ms" in x), None)
+        torch_row = _torch_row(rows, r["graph"])
         if "median_ms" not in r:
             lines.append(f"| {r['graph']} | {r['backend']} | — | error: {r.get('error')} | | | | |")
             continue
