@@ -34,6 +34,7 @@ import torch
 from torch import nn
 
 from spacepose.errors import SpaceposeError
+from spacepose.export.conv3d_as_2d import WINOGRAD_G
 
 __all__ = ["RecoveryReport", "recover_state_dict", "freeze_batchnorm", "checkpoint_from_graph", "checkpoint_folds_bn"]
 
@@ -121,8 +122,9 @@ def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, o
     """The state key whose values are closest to ``value``, within 1 % (a folded BatchNorm scales a
     convolution by its probe gamma, 1 +- 0.3 %), and how it is laid out: ``"flat"`` (same values,
     flattened), ``"T"`` (a 2-D transpose), ``"stacked"`` (the depth taps of a 5-D convolution weight
-    stacked along its outputs) or ``("tap", j)`` (depth tap ``ref[:, :, j]`` of a 5-D convolution
-    weight); the last two as :mod:`spacepose.export.conv3d_as_2d` exports them."""
+    stacked along its outputs) or ``("taps", c)`` (the combination ``sum_j c_j ref[:, :, j]`` of the
+    depth taps of a 5-D convolution weight: one tap, or a row of the Winograd kernel transform); the
+    last two as :mod:`spacepose.export.conv3d_as_2d` exports them."""
     flat = value.reshape(-1).astype(np.float64)
     scale = float(np.max(np.abs(flat))) + 1e-12
     best: tuple[float, str, object] | None = None
@@ -135,7 +137,12 @@ def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, o
             if ref.ndim == 5 and value.ndim == 4 and ref.shape[2] > 1:
                 options.append((np.moveaxis(ref, 2, 0).reshape(-1), "stacked"))
         elif ref.ndim == 5 and ref.size == flat.size * ref.shape[2]:
-            options += [(ref[:, :, j].reshape(-1), ("tap", j)) for j in range(ref.shape[2])]
+            kd = ref.shape[2]
+            combos = [tuple(float(v) for v in row) for row in np.eye(kd)]
+            if kd == len(WINOGRAD_G[0]):
+                combos += [tuple(float(v) for v in row) for row in WINOGRAD_G]
+            options += [(np.tensordot(np.asarray(c), np.moveaxis(ref, 2, 0), axes=1).reshape(-1), ("taps", c))
+                        for c in combos]
         for arr, layout in options:
             err = float(np.max(np.abs(arr - flat))) / scale
             if best is None or err < best[0]:
@@ -180,7 +187,7 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
     by_name = {prefix + k: k for k in probe_state}
 
     assigned: dict[str, np.ndarray] = {}
-    taps: dict[str, dict[int, np.ndarray]] = {}
+    taps: dict[str, list[tuple[tuple[float, ...], np.ndarray]]] = {}
     folded: set[str] = set()
     for name_a, name_b in pairs:
         value_a = probe_vals[name_a]
@@ -201,10 +208,12 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
             if found is None:
                 if value_a.size <= 1:
                     continue                            # a folded scalar constant (eps, scale)
+                if value_a.shape == value_b.shape and np.array_equal(value_a, value_b):
+                    continue                            # the same in both graphs: no weight (a depth transform)
                 raise SpaceposeError(f"{onnx_path}: initializer {name_b} {list(value_b.shape)} has no source parameter")
             key, layout = found
         if isinstance(layout, tuple):
-            taps.setdefault(key, {})[layout[1]] = value_b
+            taps.setdefault(key, []).append((layout[1], np.asarray(value_b)))
             continue
         value = value_b.T if layout == "T" else value_b
         if layout == "stacked":                         # (kd * C_out, C_in, kh, kw) -> (C_out, C_in, kd, kh, kw)
@@ -214,11 +223,15 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
         if key in bn_of_bias and not name_a.startswith(prefix + key):
             folded.add(bn_of_bias[key])
 
-    for key, by_tap in taps.items():
+    for key, parts in taps.items():
         shape = tuple(state[key].shape)
-        if sorted(by_tap) != list(range(shape[2])):
-            raise SpaceposeError(f"{onnx_path}: only depth taps {sorted(by_tap)} of {key} {list(shape)} are in the graph")
-        assigned[key] = np.stack([np.asarray(by_tap[j]).reshape(shape[:2] + shape[3:]) for j in range(shape[2])], axis=2)
+        coeffs = np.array([c for c, _ in parts])                        # (parts, kd)
+        if np.linalg.matrix_rank(coeffs) < shape[2]:
+            raise SpaceposeError(f"{onnx_path}: the graph holds too few combinations of the depth taps of {key} "
+                                 f"{list(shape)} to recover them")
+        values = np.stack([v.reshape(-1).astype(np.float64) for _, v in parts])
+        solved = np.linalg.lstsq(coeffs, values, rcond=None)[0]         # (kd, rest): tap j, flattened
+        assigned[key] = np.moveaxis(solved.reshape((shape[2],) + shape[:2] + shape[3:]), 0, 2)
 
     modules = dict(model.named_modules())
     with torch.no_grad():
@@ -290,7 +303,8 @@ def checkpoint_from_graph(onnx_path: str | os.PathLike) -> dict:
         report = recover_state_dict(model, onnx_path, lambda m, p: onnx_stereo.export_stereo(
             m, p, size=size, iters=iters, metadata={}, force=True, rewrite_convs=bool(flags.get("conv3d_as_2d")),
             rewrite_transposed=bool(flags.get("conv_transpose3d_as_2d")),
-            rewrite_narrow=bool(flags.get("narrow_conv3d_as_2d"))), prefix="model.")
+            rewrite_narrow=bool(flags.get("narrow_conv3d_as_2d")),
+            rewrite_winograd=bool(flags.get("conv3d_depth_winograd"))), prefix="model.")
         diff = onnx_stereo.parity_check(model, onnx_path, size=size, iters=iters)
         tolerance = 1e-3
         ckpt = {"kind": "stereo", "stereo_config": config.to_dict()}

@@ -11,9 +11,11 @@ ort = pytest.importorskip("onnxruntime")
 
 from torch import nn  # noqa: E402
 
-from spacepose.export.conv3d_as_2d import (Conv3dAs2d, ConvTranspose3dAs2d, NarrowConv3dAs2d,  # noqa: E402
-                                            rewrite_conv3d, wants_narrow_rewrite, wants_rewrite,
-                                            wants_transposed_rewrite)
+from spacepose.export.conv3d_as_2d import (WINOGRAD_AT, WINOGRAD_BT, WINOGRAD_G,  # noqa: E402
+                                            Conv3dAs2d, ConvTranspose3dAs2d, NarrowConv3dAs2d,
+                                            WinogradConv3dAs2d, rewrite_conv3d, wants_narrow_rewrite,
+                                            wants_rewrite, wants_transposed_rewrite, wants_winograd_rewrite,
+                                            winograd_depth_transforms)
 
 CASES = [  # (in, out, kernel, stride, padding, groups, bias, input shape)
     (8, 8, 5, 1, 2, 8, True, (1, 8, 6, 9, 10)),        # SECA key: depthwise 5x5x5
@@ -203,3 +205,75 @@ def test_narrow_rewrite_is_opt_in():
     assert wants_narrow_rewrite(model[1]) and not wants_narrow_rewrite(model[0]) and not wants_narrow_rewrite(model[3])
     with pytest.raises(ValueError, match="ungrouped"):
         NarrowConv3dAs2d(nn.Conv3d(2, 2, 3, groups=2))
+
+
+def test_winograd_matrices_compute_a_three_tap_correlation():
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        g, d = rng.normal(size=3), rng.normal(size=6)
+        want = [sum(g[k] * d[i + k] for k in range(3)) for i in range(4)]
+        np.testing.assert_allclose(WINOGRAD_AT @ ((WINOGRAD_G @ g) * (WINOGRAD_BT @ d)), want, atol=1e-12)
+
+
+@pytest.mark.parametrize("depth,pad", [(24, 1), (12, 1), (6, 1), (7, 1), (5, 0), (3, 2), (1, 1)])
+def test_winograd_depth_transforms_compute_the_padded_correlation(depth, pad):
+    """T_out ((G g) * (T_in x)) per tile is the zero-padded 3-tap correlation along depth, any length."""
+    t_in, t_out = winograd_depth_transforms(depth, pad)
+    n = t_in.shape[0] // 6
+    rng = np.random.default_rng(depth)
+    g, x = rng.normal(size=3), rng.normal(size=depth)
+    xp = np.concatenate([np.zeros(pad), x, np.zeros(pad)])
+    want = [sum(g[k] * xp[i + k] for k in range(3)) for i in range(depth + 2 * pad - 2)]
+    got = t_out @ (np.repeat(WINOGRAD_G @ g, n) * (t_in @ x))
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    assert not t_in.flags.writeable                                        # a cached constant
+
+
+WINOGRAD = [  # (in, out, kernel, stride, padding, bias, input shape)
+    (16, 16, 3, 1, 1, False, (1, 16, 24, 12, 12)),       # the regulariser's stem (depth 24: whole tiles)
+    (8, 12, 3, 1, 1, True, (2, 8, 7, 6, 9)),             # batch 2, depth 7: a partial last tile
+    (8, 8, (3, 3, 1), (1, 2, 1), (0, 1, 0), True, (1, 8, 9, 8, 5)),  # no depth padding, spatial stride
+    (4, 8, 3, 1, 2, False, (1, 4, 3, 5, 5)),             # depth padding 2, fewer slices than a tile
+]
+
+
+@pytest.mark.parametrize("case", WINOGRAD, ids=lambda c: f"d{c[6][2]}p{c[4]}")
+def test_winograd_matches_conv3d_in_torch_and_onnxruntime(case):
+    c_in, c_out, k, s, p, bias, shape = case
+    torch.manual_seed(7)
+    conv = nn.Conv3d(c_in, c_out, k, s, p, bias=bias).eval()
+    x = torch.randn(shape)
+    _assert_same_in_torch(conv, WinogradConv3dAs2d(conv), x)
+    proto = _assert_same_in_onnxruntime(conv, WinogradConv3dAs2d(conv), x)
+    kernels = _kernels(proto, "Conv")
+    assert len(kernels) == 6 and all(len(kk) == 2 for kk in kernels)      # six 2-D convolutions, whatever the depth
+    assert sum(n.op_type == "MatMul" for n in proto.graph.node) == 2
+    weights = {i.name for i in proto.graph.initializer}
+    assert all(n.input[1] in weights for n in proto.graph.node if n.op_type == "Conv")  # folded: one initializer each
+
+
+def test_winograd_rewrite_is_opt_in_takes_the_dense_layers_and_folds_batchnorm():
+    torch.manual_seed(4)
+    model = nn.Sequential(nn.Conv3d(8, 8, 3, 1, 1, bias=False), nn.BatchNorm3d(8), nn.LeakyReLU(0.2),
+                          nn.Conv3d(8, 8, 3, 1, 1, groups=8),     # depthwise: per-tap form
+                          nn.Conv3d(8, 8, 3, 2, 1),               # depth stride 2: per-tap form
+                          nn.Conv3d(8, 8, 5, 1, 2),               # 5 depth taps: per-tap form
+                          nn.Conv3d(8, 1, 3, 1, 1)).eval()        # narrow: kept
+    with torch.no_grad():
+        model[1].weight.uniform_(0.5, 1.5)
+        model[1].bias.normal_()
+        model[1].running_mean.normal_()
+        model[1].running_var.uniform_(0.5, 2.0)
+    assert type(rewrite_conv3d(model)[0]) is Conv3dAs2d
+    out = rewrite_conv3d(model, winograd=True)
+    assert [type(m) for m in out] == [WinogradConv3dAs2d, nn.Identity, nn.LeakyReLU, Conv3dAs2d, Conv3dAs2d,
+                                      Conv3dAs2d, nn.Conv3d]
+    assert [wants_winograd_rewrite(m) for m in model] == [True, False, False, False, False, False, False]
+    assert list(out.state_dict()) == list(rewrite_conv3d(model).state_dict())   # no keys of its own
+    x = torch.randn(1, 8, 10, 8, 8)
+    with torch.no_grad():
+        assert float(torch.max(torch.abs(out(x) - model(x)))) < 1e-4
+    with pytest.raises(ValueError, match="depth stride 1"):
+        WinogradConv3dAs2d(nn.Conv3d(2, 2, 3, 2, 1))
+    with pytest.raises(ValueError, match="3 depth taps"):
+        WinogradConv3dAs2d(nn.Conv3d(2, 2, (5, 3, 3), 1, 1))

@@ -38,7 +38,8 @@ def test_metadata_roundtrip(exported):
     assert got["kind"] == "stereo" and got["input_size"] == [64, 32] and got["iters"] == 2
     assert got["variant"] == "full" and got["max_disp"] == 96 and got["dataset"] == {"seed": 7, "size": 10}
     assert "training_commit" in got and got["config"]["variant"] == "full"
-    assert got["export"] == {"conv3d_as_2d": True, "conv_transpose3d_as_2d": True, "narrow_conv3d_as_2d": True}
+    assert got["export"] == {"conv3d_as_2d": True, "conv_transpose3d_as_2d": True, "narrow_conv3d_as_2d": True,
+                             "conv3d_depth_winograd": True}
 
 
 def test_grouped_3d_convs_are_exported_as_2d(exported):
@@ -57,6 +58,8 @@ def test_grouped_3d_convs_are_exported_as_2d(exported):
     assert transposed and all(len(onnx.helper.get_attribute_value(a)) == 2
                               for n in transposed for a in n.attribute if a.name == "kernel_shape")
     assert not any(n.op_type == "BatchNormalization" for n in proto.graph.node)    # folded into them
+    winograd = [n for n in proto.graph.node if n.op_type == "MatMul" and "/regularizer/stem/" in n.name]
+    assert len(winograd) == 4                                  # the two dense stem convs: T_in and T_out each
 
 
 def test_parity_torch_vs_onnxruntime(exported):
