@@ -13,16 +13,12 @@
   recorded as ``metadata["export"]["narrow_conv3d_as_2d"]``; and the dense 3x3x3 ones with depth stride 1
   with Winograd F(4, 3) along depth (``rewrite_winograd``, default on; 6 instead of 12 2-D
   convolutions per 4 output slices), recorded as ``metadata["export"]["conv3d_depth_winograd"]``;
-* the geometry lookup reads the GEV with one row ``Gather`` instead of a ``GatherElements``
-  (``row_gather``, default on; the same numbers, :data:`spacepose.models.stereo_lookup.GATHERS`), recorded
-  as ``metadata["export"]["lookup_row_gather"]``;
 * the metadata contract (:mod:`spacepose.export.metadata`) is stored under ``"spacepose"``;
 * parity: torch eager vs onnxruntime on a textured stereo pair, max |Δ| in pixels.
 """
 
 from __future__ import annotations
 
-import copy
 import logging
 import os
 from pathlib import Path
@@ -77,13 +73,11 @@ def parity_inputs(size: tuple[int, int], seed: int = 0, disparity: float = 12.0)
 def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int, int], iters: int,
                   metadata: Mapping[str, Any], force: bool = False, opset: int = OPSET,
                   rewrite_convs: bool = True, rewrite_transposed: bool | None = None,
-                  rewrite_narrow: bool | None = None, rewrite_winograd: bool | None = None,
-                  row_gather: bool = True) -> Path:
+                  rewrite_narrow: bool | None = None, rewrite_winograd: bool | None = None) -> Path:
     """Export ``model`` at ``size`` (W, H) and ``iters`` into one ONNX file carrying ``metadata``
     (plus ``metadata["export"]`` ``"conv3d_as_2d" = rewrite_convs``, ``"conv_transpose3d_as_2d" =
     rewrite_transposed``, ``"narrow_conv3d_as_2d" = rewrite_narrow`` and ``"conv3d_depth_winograd" =
-    rewrite_winograd``, the last three defaulting to ``rewrite_convs``, and ``"lookup_row_gather" =
-    row_gather``; ``model`` itself is not changed).
+    rewrite_winograd``, the last three defaulting to ``rewrite_convs``; ``model`` itself is not changed).
 
     Raises:
         SpaceposeError: ``path`` exists and ``force`` is False, or the graph holds a forbidden op.
@@ -100,10 +94,6 @@ def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int,
     rewritten = (rewrite_conv3d(model, convs=flags["conv3d_as_2d"], transposed=flags["conv_transpose3d_as_2d"],
                                 narrow=flags["narrow_conv3d_as_2d"], winograd=flags["conv3d_depth_winograd"])
                  if any(flags.values()) else model)
-    flags["lookup_row_gather"] = bool(row_gather)
-    if row_gather:
-        rewritten = copy.deepcopy(rewritten) if rewritten is model else rewritten
-        rewritten.lookup_gather = "rows"
     wrapper = StereoExportWrapper(rewritten, iters).eval()
     metadata = {**metadata, "export": {**dict(metadata.get("export") or {}), **flags}}
     left, right = (torch.from_numpy(a) for a in parity_inputs((w, h)))

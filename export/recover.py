@@ -304,8 +304,7 @@ def checkpoint_from_graph(onnx_path: str | os.PathLike) -> dict:
             m, p, size=size, iters=iters, metadata={}, force=True, rewrite_convs=bool(flags.get("conv3d_as_2d")),
             rewrite_transposed=bool(flags.get("conv_transpose3d_as_2d")),
             rewrite_narrow=bool(flags.get("narrow_conv3d_as_2d")),
-            rewrite_winograd=bool(flags.get("conv3d_depth_winograd")),
-            row_gather=bool(flags.get("lookup_row_gather"))), prefix="model.")
+            rewrite_winograd=bool(flags.get("conv3d_depth_winograd"))), prefix="model.")
         diff = onnx_stereo.parity_check(model, onnx_path, size=size, iters=iters)
         tolerance = 1e-3
         ckpt = {"kind": "stereo", "stereo_config": config.to_dict()}

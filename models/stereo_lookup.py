@@ -12,12 +12,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-__all__ = ["linear_lookup_1d", "window_lookup_1d", "window_lookup_rows", "to_rows", "GeometryLookup", "GATHERS"]
-
-#: how :class:`GeometryLookup` reads the GEV pyramid: ``"columns"`` (training, torch eager: one
-#: ``gather`` of the (C, L, N) volume) or ``"rows"`` (the exported graph: one row ``Gather`` of the
-#: volume laid out as (L + 2) * N rows of C values; the same numbers)
-GATHERS = ("columns", "rows")
+__all__ = ["linear_lookup_1d", "window_lookup_1d", "GeometryLookup"]
 
 
 def linear_lookup_1d(volume: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:
@@ -55,31 +50,6 @@ def window_lookup_1d(volume: torch.Tensor, centre: torch.Tensor, radius: int) ->
     return low + (window[:, 1:] - low) * frac
 
 
-def to_rows(volume: torch.Tensor) -> torch.Tensor:
-    """(C, L, N) -> ((L + 2) * N, C): the volume zero-padded by one row at each end of L, row ``j * N + n``
-    holding the C values of padded position j of column n (what :func:`window_lookup_rows` reads)."""
-    c, length, n = volume.shape
-    return F.pad(volume, (0, 0, 1, 1)).permute(1, 2, 0).reshape((length + 2) * n, c)
-
-
-def window_lookup_rows(rows: torch.Tensor, centre: torch.Tensor, radius: int) -> torch.Tensor:
-    """:func:`window_lookup_1d` of ``volume`` (C, L, N), given as ``rows = to_rows(volume)``: the same
-    (C, 2r+1, N), read with one ``Gather`` of (2r+2) * N row indices, each row C contiguous values,
-    instead of a ``GatherElements`` with an index per value (onnxruntime: 0.6 instead of 1.4 ms for the
-    16-channel 24-disparity GEV at 64x64, session 14)."""
-    n = centre.shape[0]
-    c = rows.shape[1]
-    length = rows.shape[0] // n - 2
-    taps = 2 * radius + 1
-    base = torch.floor(centre)
-    frac = (centre - base).reshape(1, 1, n)
-    padded_rows = base.long().reshape(1, n) + torch.arange(1 - radius, radius + 3, device=rows.device).reshape(-1, 1)
-    index = torch.clamp(padded_rows, 0, length + 1) * n + torch.arange(n, device=rows.device).reshape(1, n)
-    window = rows[index.reshape(-1)].reshape(taps + 1, n, c).permute(2, 0, 1)   # (C, 2r+2, N)
-    low = window[:, :taps]
-    return low + (window[:, 1:] - low) * frac
-
-
 def _halve(volume: torch.Tensor) -> torch.Tensor:
     """(C, L, N) -> (C, L // 2, N): mean of row pairs (avg_pool1d(2, 2) along L)."""
     m = volume.shape[1] // 2
@@ -91,13 +61,10 @@ class GeometryLookup:
 
     gev (B, c0, D, h, w), corr (B, h, w, W2) -> lookup(disp (B, 1, h, w)) ->
     (B, levels * (2r+1) * (c0 + 1), h, w); per level the c0 * (2r+1) GEV taps (channel-major), then
-    the 2r+1 all-pairs taps. The pyramids are kept as (channels, length, B*h*w); with ``gather="rows"``
-    the GEV levels as :func:`to_rows` of that (see :data:`GATHERS`; the result is the same).
+    the 2r+1 all-pairs taps. The pyramids are kept as (channels, length, B*h*w).
     """
 
-    def __init__(self, gev: torch.Tensor, corr: torch.Tensor, levels: int, radius: int, gather: str = "columns") -> None:
-        if gather not in GATHERS:
-            raise ValueError(f"gather must be one of {GATHERS}, got {gather!r}")
+    def __init__(self, gev: torch.Tensor, corr: torch.Tensor, levels: int, radius: int) -> None:
         b, c0, d, h, w = gev.shape
         n = b * h * w
         self.shape = (b, h, w)
@@ -107,10 +74,6 @@ class GeometryLookup:
         for _ in range(levels - 1):
             self.gev_pyramid.append(_halve(self.gev_pyramid[-1]))
             self.corr_pyramid.append(_halve(self.corr_pyramid[-1]))
-        self._read_gev = window_lookup_1d
-        if gather == "rows":
-            self.gev_pyramid = [to_rows(v) for v in self.gev_pyramid]
-            self._read_gev = window_lookup_rows
         self.x = torch.arange(w, dtype=gev.dtype, device=gev.device).view(1, 1, 1, w)
 
     def __call__(self, disp: torch.Tensor) -> torch.Tensor:
@@ -121,7 +84,7 @@ class GeometryLookup:
         out = []
         for i, (gev_i, corr_i) in enumerate(zip(self.gev_pyramid, self.corr_pyramid)):
             scale = 1.0 / 2**i
-            out.append(self._read_gev(gev_i, d_flat * scale, self.radius).reshape(-1, n))
+            out.append(window_lookup_1d(gev_i, d_flat * scale, self.radius).reshape(-1, n))
             out.append(window_lookup_1d(corr_i, x_right * scale, self.radius).reshape(-1, n))
         features = torch.cat(out, dim=0)                             # (channels, B*h*w)
         return features.reshape(-1, b, h, w).permute(1, 0, 2, 3)

@@ -52,9 +52,6 @@ class TSCAStereo(nn.Module):
         self.register_buffer(
             "disparities", torch.arange(cfg.num_disp, dtype=torch.float32).view(1, -1, 1, 1), persistent=False
         )
-        #: how the geometry lookup reads the GEV (:data:`spacepose.models.stereo_lookup.GATHERS`; the same
-        #: numbers either way): training and torch eager ``"columns"``, the exporter sets ``"rows"``
-        self.lookup_gather = "columns"
 
     @staticmethod
     def normalise(image: torch.Tensor) -> torch.Tensor:
@@ -88,8 +85,7 @@ class TSCAStereo(nn.Module):
         context = self.context(left_n)
         hidden = context.hidden
         lookup = GeometryLookup(
-            gev, all_pairs_correlation(match_left, match_right), self.cfg.corr_levels, self.cfg.corr_radius,
-            gather=self.lookup_gather,
+            gev, all_pairs_correlation(match_left, match_right), self.cfg.corr_levels, self.cfg.corr_radius
         )
         preds: list[torch.Tensor] = []
         for k in range(n_iters):

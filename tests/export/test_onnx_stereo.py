@@ -39,7 +39,7 @@ def test_metadata_roundtrip(exported):
     assert got["variant"] == "full" and got["max_disp"] == 96 and got["dataset"] == {"seed": 7, "size": 10}
     assert "training_commit" in got and got["config"]["variant"] == "full"
     assert got["export"] == {"conv3d_as_2d": True, "conv_transpose3d_as_2d": True, "narrow_conv3d_as_2d": True,
-                             "conv3d_depth_winograd": True, "lookup_row_gather": True}
+                             "conv3d_depth_winograd": True}
 
 
 def test_grouped_3d_convs_are_exported_as_2d(exported):
@@ -60,17 +60,6 @@ def test_grouped_3d_convs_are_exported_as_2d(exported):
     assert not any(n.op_type == "BatchNormalization" for n in proto.graph.node)    # folded into them
     winograd = [n for n in proto.graph.node if n.op_type == "MatMul" and "/regularizer/stem/" in n.name]
     assert len(winograd) == 4                                  # the two dense stem convs: T_in and T_out each
-
-
-def test_gev_lookup_is_a_row_gather(exported):
-    """The GEV is read with row Gathers; GatherElements only reads the all-pairs pyramid (one per level
-    and iteration)."""
-    path, model, _ = exported
-    proto = onnx.load(str(path))
-    levels = model.cfg.corr_levels
-    assert sum(n.op_type == "GatherElements" for n in proto.graph.node) == 2 * levels
-    assert sum(n.op_type == "Gather" and "GatherElements" not in n.name for n in proto.graph.node) >= 2 * levels
-    assert model.lookup_gather == "columns"                   # the exported model itself is unchanged
 
 
 def test_parity_torch_vs_onnxruntime(exported):

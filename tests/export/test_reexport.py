@@ -53,7 +53,7 @@ def test_stereo_graph_comes_back_in_the_new_form(old_stereo, tmp_path):
     assert _transposed_dims(path) == [3] and _transposed_dims(out) == [2]
     assert result["kind"] == "stereo" and result["export"] == {"conv3d_as_2d": True, "conv_transpose3d_as_2d": True,
                                                                "narrow_conv3d_as_2d": True,
-                                                               "conv3d_depth_winograd": True, "lookup_row_gather": True}
+                                                               "conv3d_depth_winograd": True}
     assert max(result["recovery_parity"], result["torch_parity"], result["graph_parity"]) < 1e-3
     old_meta, new_meta = read_metadata(path), read_metadata(out)
     for key in ("dataset", "metrics", "training", "config", "input_size", "iters", "max_disp", "training_commit"):

@@ -1,10 +1,7 @@
 import torch
 import torch.nn.functional as F
 
-import pytest
-
-from spacepose.models.stereo_lookup import (GeometryLookup, linear_lookup_1d, to_rows, window_lookup_1d,
-                                            window_lookup_rows)
+from spacepose.models.stereo_lookup import GeometryLookup, linear_lookup_1d, window_lookup_1d
 
 
 def _grid_sample_1d(volume, positions):
@@ -69,21 +66,3 @@ def test_geometry_lookup_matches_per_pixel_linear_lookup():
                     if level < 2:
                         g, cr = F.avg_pool1d(g, 2, 2), F.avg_pool1d(cr, 2, 2)
                 torch.testing.assert_close(out[bi, :, y, x], torch.cat(want), atol=1e-5, rtol=0)
-
-
-def test_row_gather_reads_the_same_numbers():
-    """The exported graph's row Gather gives window_lookup_1d's values exactly, and GeometryLookup with
-    gather="rows" the same features (batch 2, 3 levels, windows leaving the volume)."""
-    torch.manual_seed(3)
-    c, length, n, r = 4, 12, 30, 3
-    volume = torch.randn(c, length, n)
-    centre = torch.rand(n) * 24.0 - 6.0
-    centre[:2] = torch.tensor([0.0, 11.0])
-    assert torch.equal(window_lookup_rows(to_rows(volume), centre, r), window_lookup_1d(volume, centre, r))
-    b, c0, d, h, w = 2, 3, 16, 2, 5
-    gev, corr = torch.randn(b, c0, d, h, w), torch.randn(b, h, w, w)
-    disp = torch.rand(b, 1, h, w) * 12.0 - 1.0
-    want = GeometryLookup(gev, corr, levels=3, radius=2)(disp)
-    assert torch.equal(GeometryLookup(gev, corr, levels=3, radius=2, gather="rows")(disp), want)
-    with pytest.raises(ValueError, match="gather"):
-        GeometryLookup(gev, corr, levels=3, radius=2, gather="grid")
