@@ -25,10 +25,11 @@ memory arena the decoder's took 17.5 of the stereo graph's ~130 ms kernel time, 
 
 The dense 3x3x3 convolutions with depth stride 1 (the regulariser's stem and its 1/4-resolution
 decoder) can instead become :class:`WinogradConv3dAs2d`: Winograd's minimal filtering F(4, 3) along
-depth only. Each tile of 4 output slices needs 6 tap-combined 2-D convolutions instead of 12, the
-depth transforms are two constant ``MatMul`` calls, and the result is the same function up to float
-rounding (1e-5 relative). The dense 16-channel layer at 24x64x64 took 4.7-5.2 ms in this form against
-7.2-7.3 ms per tap and torch eager's 4.3-5.1 ms (2 threads, session 14 scratch timing).
+depth only. Each tile of 4 output slices needs 6 tap-combined 2-D convolutions instead of 12 (run as
+one grouped convolution), the depth transforms are two constant ``MatMul`` calls, and the result is
+the same function up to float rounding (1e-5 relative). The dense 16-channel layer at 24x64x64 took
+4.7-5.2 ms in this form (six convolutions; grouped, 1.2x less again) against 7.2-7.3 ms per tap and
+torch eager's 4.3-5.1 ms (2 threads, session 14 scratch timing).
 
 Only the export uses this: training and the torch-eager baseline run the original layers, and the
 export's parity check (torch original vs onnxruntime rewritten) guards the equivalence.
@@ -210,7 +211,7 @@ _TILE, _POINTS = WINOGRAD_AT.shape
 def winograd_depth_transforms(depth: int, pad: int) -> tuple[np.ndarray, np.ndarray]:
     """The depth transforms of :class:`WinogradConv3dAs2d` for ``depth`` input slices zero-padded by
     ``pad`` on each side: ``T_in`` (6 n, depth) and ``T_out`` (depth + 2 pad - 2, 6 n), float32, with
-    n = ceil(outputs / 4) tiles. Row ``k n + t`` of ``T_in @ x`` is point k of tile t; the padding is
+    n = ceil(outputs / 4) tiles. Row ``6 t + k`` of ``T_in @ x`` is point k of tile t; the padding is
     the columns left out, and the last tile's outputs beyond the end are rows left out."""
     d_out = depth + 2 * pad - 2
     if depth < 1 or pad < 0 or d_out < 1:
@@ -222,9 +223,9 @@ def winograd_depth_transforms(depth: int, pad: int) -> tuple[np.ndarray, np.ndar
         for k in range(_POINTS):
             for j in range(_POINTS):
                 if 0 <= t * _TILE + j - pad < depth:
-                    t_in[k * n + t, t * _TILE + j - pad] = WINOGRAD_BT[k, j]
+                    t_in[_POINTS * t + k, t * _TILE + j - pad] = WINOGRAD_BT[k, j]
             for i in range(min(_TILE, d_out - t * _TILE)):
-                t_out[t * _TILE + i, k * n + t] = WINOGRAD_AT[i, k]
+                t_out[t * _TILE + i, _POINTS * t + k] = WINOGRAD_AT[i, k]
     t_in, t_out = t_in.astype(np.float32), t_out.astype(np.float32)
     t_in.setflags(write=False)
     t_out.setflags(write=False)
@@ -234,20 +235,24 @@ def winograd_depth_transforms(depth: int, pad: int) -> tuple[np.ndarray, np.ndar
 class WinogradConv3dAs2d(_DepthTaps):
     """The map of ``conv`` (an ``nn.Conv3d`` with 3 depth taps, depth stride 1, zero padding given as
     numbers, no dilation): (B, C, D, H, W) -> (B, C_out, D', H', W'), computed with Winograd F(4, 3)
-    along depth (module docstring): the depth transform ``T_in`` (one ``MatMul``), 6 grouped ``Conv2d``
-    calls with the transformed kernels ``WINOGRAD_G @ taps`` over all tiles at once, and ``T_out``
-    (one ``MatMul``). Equal to ``conv`` up to float rounding. The state dict is the original's."""
+    along depth (module docstring): the depth transform ``T_in`` (one ``MatMul``), whose 6 points per
+    tile become channel groups of ONE grouped ``Conv2d`` over all tiles (group k holds the transformed
+    kernel ``WINOGRAD_G[k] @ taps``), and ``T_out`` (one ``MatMul``). One convolution instead of six
+    spares onnxruntime a slice and a layout reorder per point (1.2x on the regulariser's stem layer).
+    Equal to ``conv`` up to float rounding. The state dict is the original's."""
 
     def __init__(self, conv: nn.Conv3d) -> None:
         super().__init__(conv)                                          # weight (C_out, C_in / g, 3, kh, kw)
         if self.kd != 3 or self.stride[0] != 1:
             raise ValueError("WinogradConv3dAs2d needs 3 depth taps and depth stride 1")
 
-    def _kernel(self, k: int) -> torch.Tensor:
-        """Transformed kernel k, ``sum_j WINOGRAD_G[k, j] weight[:, :, j]`` (C_out, C_in / g, kh, kw): computed
-        from the weight, so that the export folds it into one initializer per k."""
-        terms = [float(c) * self.weight[:, :, j] for j, c in enumerate(WINOGRAD_G[k]) if c != 0.0]
-        return functools.reduce(torch.add, terms)
+    def _kernels(self) -> torch.Tensor:
+        """The transformed kernels stacked, (6 C_out, C_in / g, kh, kw): rows ``k C_out ..`` hold
+        ``sum_j WINOGRAD_G[k, j] weight[:, :, j]``. Computed from the weight, so that the export folds
+        them into one initializer."""
+        return torch.cat([functools.reduce(torch.add, [float(c) * self.weight[:, :, j]
+                                                       for j, c in enumerate(row) if c != 0.0])
+                          for row in WINOGRAD_G])
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         b, c, d, h, w = x.shape
@@ -255,12 +260,12 @@ class WinogradConv3dAs2d(_DepthTaps):
         _, sh, sw = self.stride
         t_in, t_out = (torch.from_numpy(m.copy()).to(x.dtype) for m in winograd_depth_transforms(d, pd))
         n = t_in.shape[0] // _POINTS
-        u = torch.matmul(t_in, x.transpose(1, 2).reshape(b, d, c * h * w)).reshape(b, _POINTS, n * c, h, w)
-        parts = [F.conv2d(u[:, k].reshape(b * n, c, h, w), self._kernel(k), None, (sh, sw), (ph, pw), 1, self.groups)
-                 for k in range(_POINTS)]
-        co, ho, wo = parts[0].shape[1:]
-        m = torch.stack([p.reshape(b, n, co, ho, wo) for p in parts], 1).reshape(b, _POINTS * n, co * ho * wo)
-        y = torch.matmul(t_out, m).reshape(b, t_out.shape[0], co, ho, wo).transpose(1, 2)
+        u = torch.matmul(t_in, x.transpose(1, 2).reshape(b, d, c * h * w))              # (B, 6 n, C H W)
+        m = F.conv2d(u.reshape(b * n, _POINTS * c, h, w), self._kernels(), None, (sh, sw), (ph, pw), 1,
+                     _POINTS * self.groups)                                             # (B n, 6 C_out, H', W')
+        co, ho, wo = m.shape[1] // _POINTS, m.shape[2], m.shape[3]
+        y = torch.matmul(t_out, m.reshape(b, n * _POINTS, co * ho * wo))
+        y = y.reshape(b, t_out.shape[0], co, ho, wo).transpose(1, 2)
         return y if self.bias is None else y + self.bias.reshape(1, -1, 1, 1, 1)
 
 

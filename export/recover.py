@@ -118,13 +118,21 @@ def _probe(model: nn.Module, seed: int) -> tuple[nn.Module, dict[str, str]]:
     return probe, bn_of_bias
 
 
+def _tap_combinations(kd: int) -> list[np.ndarray]:
+    """Coefficient matrices (r, kd) of the forms :mod:`spacepose.export.conv3d_as_2d` gives a 5-D
+    convolution weight's ``kd`` depth taps: each tap alone, all taps stacked, and for 3 taps each
+    Winograd kernel transform row alone and all rows stacked."""
+    bases = [np.eye(kd)] + ([WINOGRAD_G] if kd == WINOGRAD_G.shape[1] else [])
+    return [m for base in bases for m in [base[i:i + 1] for i in range(len(base))] + [base]]
+
+
 def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, object] | None:
     """The state key whose values are closest to ``value``, within 1 % (a folded BatchNorm scales a
     convolution by its probe gamma, 1 +- 0.3 %), and how it is laid out: ``"flat"`` (same values,
-    flattened), ``"T"`` (a 2-D transpose), ``"stacked"`` (the depth taps of a 5-D convolution weight
-    stacked along its outputs) or ``("taps", c)`` (the combination ``sum_j c_j ref[:, :, j]`` of the
-    depth taps of a 5-D convolution weight: one tap, or a row of the Winograd kernel transform); the
-    last two as :mod:`spacepose.export.conv3d_as_2d` exports them."""
+    flattened), ``"T"`` (a 2-D transpose) or ``("taps", M)``: the combinations ``sum_j M[i, j] ref[:, :, j]``
+    of the depth taps of a 5-D convolution weight, stacked along the outputs (one tap, the taps
+    stacked, a Winograd kernel transform row, or all of them, as :mod:`spacepose.export.conv3d_as_2d`
+    exports them; :func:`_tap_combinations`)."""
     flat = value.reshape(-1).astype(np.float64)
     scale = float(np.max(np.abs(flat))) + 1e-12
     best: tuple[float, str, object] | None = None
@@ -134,15 +142,11 @@ def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, o
             options.append((ref.reshape(-1), "flat"))
             if ref.ndim == 2 and value.shape == ref.shape[::-1]:
                 options.append((ref.T.reshape(-1), "T"))
-            if ref.ndim == 5 and value.ndim == 4 and ref.shape[2] > 1:
-                options.append((np.moveaxis(ref, 2, 0).reshape(-1), "stacked"))
-        elif ref.ndim == 5 and ref.size == flat.size * ref.shape[2]:
-            kd = ref.shape[2]
-            combos = [tuple(float(v) for v in row) for row in np.eye(kd)]
-            if kd == len(WINOGRAD_G[0]):
-                combos += [tuple(float(v) for v in row) for row in WINOGRAD_G]
-            options += [(np.tensordot(np.asarray(c), np.moveaxis(ref, 2, 0), axes=1).reshape(-1), ("taps", c))
-                        for c in combos]
+        if ref.ndim == 5 and value.ndim == 4 and ref.shape[2] > 1:
+            taps = np.moveaxis(ref, 2, 0)                               # (kd, C_out, C_in, kh, kw)
+            for m in _tap_combinations(ref.shape[2]):
+                if len(m) * taps[0].size == flat.size:
+                    options.append((np.tensordot(m, taps, axes=1).reshape(-1), ("taps", tuple(map(tuple, m)))))
         for arr, layout in options:
             err = float(np.max(np.abs(arr - flat))) / scale
             if best is None or err < best[0]:
@@ -208,17 +212,14 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
             if found is None:
                 if value_a.size <= 1:
                     continue                            # a folded scalar constant (eps, scale)
-                if value_a.shape == value_b.shape and np.array_equal(value_a, value_b):
-                    continue                            # the same in both graphs: no weight (a depth transform)
                 raise SpaceposeError(f"{onnx_path}: initializer {name_b} {list(value_b.shape)} has no source parameter")
             key, layout = found
-        if isinstance(layout, tuple):
-            taps.setdefault(key, []).append((layout[1], np.asarray(value_b)))
+        if isinstance(layout, tuple):                   # combinations of depth taps, stacked along the outputs
+            rows = layout[1]
+            for row, part in zip(rows, np.asarray(value_b).reshape(len(rows), -1)):
+                taps.setdefault(key, []).append((row, part))
             continue
         value = value_b.T if layout == "T" else value_b
-        if layout == "stacked":                         # (kd * C_out, C_in, kh, kw) -> (C_out, C_in, kd, kh, kw)
-            shape = tuple(state[key].shape)
-            value = np.moveaxis(np.asarray(value_b).reshape((shape[2], shape[0], shape[1]) + shape[3:]), 0, 2)
         assigned[key] = np.ascontiguousarray(value).reshape(state[key].shape)
         if key in bn_of_bias and not name_a.startswith(prefix + key):
             folded.add(bn_of_bias[key])

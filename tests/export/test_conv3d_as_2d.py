@@ -224,32 +224,33 @@ def test_winograd_depth_transforms_compute_the_padded_correlation(depth, pad):
     g, x = rng.normal(size=3), rng.normal(size=depth)
     xp = np.concatenate([np.zeros(pad), x, np.zeros(pad)])
     want = [sum(g[k] * xp[i + k] for k in range(3)) for i in range(depth + 2 * pad - 2)]
-    got = t_out @ (np.repeat(WINOGRAD_G @ g, n) * (t_in @ x))
+    got = t_out @ (np.tile(WINOGRAD_G @ g, n) * (t_in @ x))
     np.testing.assert_allclose(got, want, atol=1e-5)
     assert not t_in.flags.writeable                                        # a cached constant
 
 
-WINOGRAD = [  # (in, out, kernel, stride, padding, bias, input shape)
-    (16, 16, 3, 1, 1, False, (1, 16, 24, 12, 12)),       # the regulariser's stem (depth 24: whole tiles)
-    (8, 12, 3, 1, 1, True, (2, 8, 7, 6, 9)),             # batch 2, depth 7: a partial last tile
-    (8, 8, (3, 3, 1), (1, 2, 1), (0, 1, 0), True, (1, 8, 9, 8, 5)),  # no depth padding, spatial stride
-    (4, 8, 3, 1, 2, False, (1, 4, 3, 5, 5)),             # depth padding 2, fewer slices than a tile
+WINOGRAD = [  # (in, out, kernel, stride, padding, bias, groups, input shape)
+    (16, 16, 3, 1, 1, False, 1, (1, 16, 24, 12, 12)),    # the regulariser's stem (depth 24: whole tiles)
+    (8, 12, 3, 1, 1, True, 1, (2, 8, 7, 6, 9)),          # batch 2, depth 7: a partial last tile
+    (8, 8, (3, 3, 1), (1, 2, 1), (0, 1, 0), True, 1, (1, 8, 9, 8, 5)),  # no depth padding, spatial stride
+    (4, 8, 3, 1, 2, False, 1, (1, 4, 3, 5, 5)),          # depth padding 2, fewer slices than a tile
+    (8, 4, 3, 1, 1, True, 2, (1, 8, 6, 5, 5)),           # 2 groups
 ]
 
 
-@pytest.mark.parametrize("case", WINOGRAD, ids=lambda c: f"d{c[6][2]}p{c[4]}")
+@pytest.mark.parametrize("case", WINOGRAD, ids=lambda c: f"d{c[-1][2]}p{c[4]}g{c[-2]}")
 def test_winograd_matches_conv3d_in_torch_and_onnxruntime(case):
-    c_in, c_out, k, s, p, bias, shape = case
+    c_in, c_out, k, s, p, bias, groups, shape = case
     torch.manual_seed(7)
-    conv = nn.Conv3d(c_in, c_out, k, s, p, bias=bias).eval()
+    conv = nn.Conv3d(c_in, c_out, k, s, p, groups=groups, bias=bias).eval()
     x = torch.randn(shape)
     _assert_same_in_torch(conv, WinogradConv3dAs2d(conv), x)
     proto = _assert_same_in_onnxruntime(conv, WinogradConv3dAs2d(conv), x)
-    kernels = _kernels(proto, "Conv")
-    assert len(kernels) == 6 and all(len(kk) == 2 for kk in kernels)      # six 2-D convolutions, whatever the depth
+    convs = [n for n in proto.graph.node if n.op_type == "Conv"]
+    assert len(convs) == 1 and _kernels(proto, "Conv") == [list(conv.kernel_size[1:])]   # one 2-D convolution
+    assert next(a.i for a in convs[0].attribute if a.name == "group") == 6 * groups  # a group per Winograd point
     assert sum(n.op_type == "MatMul" for n in proto.graph.node) == 2
-    weights = {i.name for i in proto.graph.initializer}
-    assert all(n.input[1] in weights for n in proto.graph.node if n.op_type == "Conv")  # folded: one initializer each
+    assert convs[0].input[1] in {i.name for i in proto.graph.initializer}          # kernels folded into one initializer
 
 
 def test_winograd_rewrite_is_opt_in_takes_the_dense_layers_and_folds_batchnorm():
