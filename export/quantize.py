@@ -96,9 +96,61 @@ def _copy_metadata(src: Path, dst: Path, precision: str, extra: dict[str, Any]) 
     onnx.save(model, str(dst))
 
 
+def winograd_nodes(model) -> list[str]:
+    """Names of the nodes of the Winograd depth form (:class:`spacepose.export.conv3d_as_2d.WinogradConv3dAs2d`)
+    in the ONNX ``model``: the ``MatMul`` nodes whose constant operand is a depth transform
+    (:func:`~spacepose.export.conv3d_as_2d.winograd_depth_transforms`) and the convolution between
+    them. Their transforms widen the value range (coefficients up to 8), so int8 loses more there than
+    anywhere else; :func:`quantize_int8` leaves them in float32."""
+    from onnx import numpy_helper
+
+    from spacepose.export.conv3d_as_2d import winograd_depth_transforms
+
+    consts = {i.name: numpy_helper.to_array(i) for i in model.graph.initializer}
+    for node in model.graph.node:
+        if node.op_type == "Constant" and node.attribute and node.attribute[0].name == "value":
+            consts[node.output[0]] = numpy_helper.to_array(node.attribute[0].t)
+
+    def is_transform(name: str) -> bool:
+        a = consts.get(name)
+        if a is None or a.ndim != 2 or a.dtype != np.float32:
+            return False
+        for depth, pad in [(a.shape[1], p) for p in range(3)] + [(a.shape[0] + 2 - 2 * p, p) for p in range(3)]:
+            if depth < 1:
+                continue
+            try:
+                t_in, t_out = winograd_depth_transforms(int(depth), pad)
+            except ValueError:
+                continue
+            if any(t.shape == a.shape and np.array_equal(t, a) for t in (t_in, t_out)):
+                return True
+        return False
+
+    names: list[str] = []
+    consumers: dict[str, list] = {}
+    for node in model.graph.node:
+        for x in node.input:
+            consumers.setdefault(x, []).append(node)
+    for node in model.graph.node:
+        if node.op_type != "MatMul" or not any(is_transform(x) for x in node.input):
+            continue
+        names.append(node.name)
+        frontier = list(node.output)        # the grouped convolution fed by T_in, through reshapes
+        while frontier:
+            for nxt in consumers.get(frontier.pop(), []):
+                if nxt.op_type in ("Reshape", "Transpose"):
+                    frontier += list(nxt.output)
+                elif nxt.op_type == "Conv":
+                    names.append(nxt.name)
+    return names
+
+
 def quantize_int8(src: str | Path, dst: str | Path, feeds: Sequence[dict[str, np.ndarray]],
                   op_types: Iterable[str] = ("Conv", "MatMul", "Gemm")) -> None:
-    """Static QDQ int8 quantization of ``src`` calibrated on ``feeds`` (a list of input dicts)."""
+    """Static QDQ int8 quantization of ``src`` calibrated on ``feeds`` (a list of input dicts); the
+    Winograd depth form's nodes (:func:`winograd_nodes`) stay float32."""
+    import onnx
+
     from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
@@ -115,10 +167,12 @@ def quantize_int8(src: str | Path, dst: str | Path, feeds: Sequence[dict[str, np
     with tempfile.TemporaryDirectory() as tmp:
         pre = Path(tmp) / "pre.onnx"
         quant_pre_process(str(src), str(pre), skip_symbolic_shape=True)
+        kept = winograd_nodes(onnx.load(str(pre)))
         quantize_static(str(pre), str(dst), Reader(), quant_format=QuantFormat.QDQ, per_channel=True,
                         activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-                        op_types_to_quantize=list(op_types))
-    _copy_metadata(Path(src), Path(dst), "int8", {"calibration_inputs": len(feeds), "op_types": list(op_types)})
+                        op_types_to_quantize=list(op_types), nodes_to_exclude=kept)
+    _copy_metadata(Path(src), Path(dst), "int8", {"calibration_inputs": len(feeds), "op_types": list(op_types),
+                                                   "float32_nodes": len(kept)})
 
 
 def convert_fp16(src: str | Path, dst: str | Path) -> None:
