@@ -5,8 +5,10 @@ regulariser's stages and the classifier, and the whole network) is exported alon
 stereo exporter gives it (:func:`spacepose.export.conv3d_as_2d.rewrite_conv3d` with the export flags
 of a graph's metadata, or the current exporter's defaults), and run on the inputs the real network
 feeds it (captured from one forward pass of a textured pair). torch eager runs the original block.
-Both alternate call by call in one process, so the machine's drift hits them alike; the table gives
-the median milliseconds and torch eager / onnxruntime. Timings are never asserted in tests.
+Both run in one process, in alternating chunks of calls (:func:`time_pair`), so the machine's drift
+hits them alike; the table gives the median milliseconds and torch eager / onnxruntime. The whole
+network's row is a check against ``python -m spacepose.tools.bench_graphs``, which runs each backend in
+a process of its own. Timings are never asserted in tests.
 
     python -m spacepose.tools.bench_stereo_blocks --checkpoint runs/stereo_ft_s6e/last.pt \
         --graph runtime/bundles/default/stereo.onnx --threads 2 --calls 20 --out reports/bench_stereo_blocks.json
@@ -55,22 +57,29 @@ def capture_block_inputs(model, left, right, names=REGULARIZER_BLOCKS) -> dict[s
     return captured
 
 
-def time_pair(torch_fn, session, feeds: dict[str, np.ndarray], args: tuple, calls: int) -> tuple[float, float]:
-    """Median ms of ``session.run(None, feeds)`` and ``torch_fn(*args)``, alternating call by call."""
+def time_pair(torch_fn, session, feeds: dict[str, np.ndarray], args: tuple, calls: int,
+              chunk: int = 5) -> tuple[float, float]:
+    """Median ms of ``calls`` calls of ``session.run(None, feeds)`` and of ``torch_fn(*args)``, taken in
+    alternating chunks of ``chunk`` timed calls, each chunk after one untimed call: the machine's drift
+    hits both alike, and neither runtime's worker threads, still spinning after its last call, are
+    timed against the other's first."""
     import torch
 
-    ort_ms, torch_ms = [], []
+    ort_ms: list[float] = []
+    torch_ms: list[float] = []
+
+    def run(fn, out: list[float], n: int) -> None:
+        fn()
+        for _ in range(n):
+            t0 = time.perf_counter()
+            fn()
+            out.append((time.perf_counter() - t0) * 1e3)
+
     with torch.no_grad():
-        for _ in range(2):
-            session.run(None, feeds)
-            torch_fn(*args)
-        for _ in range(calls):
-            t0 = time.perf_counter()
-            session.run(None, feeds)
-            ort_ms.append((time.perf_counter() - t0) * 1e3)
-            t0 = time.perf_counter()
-            torch_fn(*args)
-            torch_ms.append((time.perf_counter() - t0) * 1e3)
+        while len(ort_ms) < calls:
+            n = min(chunk, calls - len(ort_ms))
+            run(lambda: session.run(None, feeds), ort_ms, n)
+            run(lambda: torch_fn(*args), torch_ms, n)
     return float(np.median(ort_ms)), float(np.median(torch_ms))
 
 
@@ -85,6 +94,10 @@ def _session(module, args: tuple, threads: int):
     opts.intra_op_num_threads = threads
     opts.enable_cpu_mem_arena = True
     opts.log_severity_level = 3
+    # as the runtime's stereo session (spacepose.onnx_session.make_session): workers spin between the
+    # graph's operators but stop when run() returns, so they do not slow the torch calls that follow
+    opts.add_session_config_entry("session.intra_op.allow_spinning", "1")
+    opts.add_session_config_entry("session.force_spinning_stop", "1")
     return ort.InferenceSession(buf.getvalue(), opts, providers=["CPUExecutionProvider"]), names
 
 
