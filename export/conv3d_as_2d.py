@@ -47,7 +47,7 @@ from torch import nn
 
 __all__ = ["Conv3dAs2d", "ConvTranspose3dAs2d", "NarrowConv3dAs2d", "WinogradConv3dAs2d", "rewrite_conv3d",
            "wants_rewrite", "wants_transposed_rewrite", "wants_narrow_rewrite", "wants_winograd_rewrite",
-           "winograd_depth_transforms", "WINOGRAD_G", "MIN_OUT_CHANNELS"]
+           "winograd_depth_transforms", "WINOGRAD_BT", "WINOGRAD_G", "WINOGRAD_AT", "MIN_OUT_CHANNELS"]
 
 #: narrower layers (the 1-channel disparity classifier) are not split into per-tap 2-D convolutions:
 #: onnxruntime's blocked 2-D kernels need 8 or 16 output channels, and the plain path is slower than
