@@ -21,9 +21,9 @@ convolutions (after: 1.01x); the 1/4-resolution transposed convolution is now th
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import logging
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -85,21 +85,18 @@ def time_pair(torch_fn, session, feeds: dict[str, np.ndarray], args: tuple, call
 
 
 def _session(module, args: tuple, threads: int):
-    import onnxruntime as ort
+    """``module`` exported on ``args`` and loaded as the runtime loads its stereo graph
+    (:func:`spacepose.onnx_session.make_session` with the arena and spinning that stops when run()
+    returns, so onnxruntime's workers do not slow the torch calls that follow); and its input names."""
     import torch
 
-    buf = io.BytesIO()
+    from spacepose.onnx_session import make_session
+
     names = [f"x{i}" for i in range(len(args))]
-    torch.onnx.export(module, args, buf, opset_version=17, dynamo=False, input_names=names)
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = threads
-    opts.enable_cpu_mem_arena = True
-    opts.log_severity_level = 3
-    # as the runtime's stereo session (spacepose.onnx_session.make_session): workers spin between the
-    # graph's operators but stop when run() returns, so they do not slow the torch calls that follow
-    opts.add_session_config_entry("session.intra_op.allow_spinning", "1")
-    opts.add_session_config_entry("session.force_spinning_stop", "1")
-    return ort.InferenceSession(buf.getvalue(), opts, providers=["CPUExecutionProvider"]), names
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "block.onnx"
+        torch.onnx.export(module, args, str(path), opset_version=17, dynamo=False, input_names=names)
+        return make_session(path, threads=threads, mem_arena=True, spinning=True), names
 
 
 def bench_blocks(model, flags: dict[str, bool], size: tuple[int, int], iters: int, *, threads: int = 2,
@@ -111,7 +108,7 @@ def bench_blocks(model, flags: dict[str, bool], size: tuple[int, int], iters: in
     from torch import nn
 
     from spacepose.export.conv3d_as_2d import rewrite_conv3d
-    from spacepose.export.onnx_stereo import parity_inputs
+    from spacepose.export.onnx_stereo import StereoExportWrapper, parity_inputs
     from spacepose.models.cost_volume import groupwise_correlation
 
     torch.set_num_threads(threads)
@@ -142,14 +139,6 @@ def bench_blocks(model, flags: dict[str, bool], size: tuple[int, int], iters: in
             gev = self.m.regularizer(volume, list(features))
             return gev, self.m.regularizer.classify(gev)
 
-    class Whole(nn.Module):
-        def __init__(self, m):
-            super().__init__()
-            self.m = m
-
-        def forward(self, left, right):
-            return self.m(left, right, iters=iters, test_mode=True)
-
     with torch.no_grad():
         prefix_out = Prefix(model)(left, right)
     inputs = capture_block_inputs(model, left, right, blocks)
@@ -158,7 +147,8 @@ def bench_blocks(model, flags: dict[str, bool], size: tuple[int, int], iters: in
         ("regularizer + classifier", Regularise(model), Regularise(fast), prefix_out)]
     slow_mods, fast_mods = dict(model.regularizer.named_modules()), dict(fast.regularizer.named_modules())
     jobs += [(f"regularizer.{n}", slow_mods[n], fast_mods[n], inputs[n]) for n in blocks if n in inputs]
-    jobs.append((f"whole network, {iters} iterations", Whole(model), Whole(fast), (left, right)))
+    jobs.append((f"whole network, {iters} iterations", StereoExportWrapper(model, iters),
+                 StereoExportWrapper(fast, iters), (left, right)))
     rows = []
     for name, slow, quick, args in jobs:
         session, names = _session(quick.eval(), args, threads)
