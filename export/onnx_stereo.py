@@ -12,7 +12,10 @@
   classifier as one 2-D convolution with its depth taps stacked (``rewrite_narrow``, default on),
   recorded as ``metadata["export"]["narrow_conv3d_as_2d"]``; and the dense 3x3x3 ones with depth stride 1
   with Winograd F(4, 3) along depth (``rewrite_winograd``, default on; 6 instead of 12 2-D
-  convolutions per 4 output slices), recorded as ``metadata["export"]["conv3d_depth_winograd"]``;
+  convolutions per 4 output slices), recorded as ``metadata["export"]["conv3d_depth_winograd"]``; and the
+  ConvTranspose3d upsamplers instead as one 2-D convolution over windows of depth slices plus a pixel
+  shuffle (``rewrite_polyphase``, default on; 2.4-3x faster than the per-tap form), recorded as
+  ``metadata["export"]["conv_transpose3d_polyphase"]``;
 * the metadata contract (:mod:`spacepose.export.metadata`) is stored under ``"spacepose"``;
 * parity: torch eager vs onnxruntime on a textured stereo pair, max |Δ| in pixels.
 """
@@ -73,11 +76,13 @@ def parity_inputs(size: tuple[int, int], seed: int = 0, disparity: float = 12.0)
 def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int, int], iters: int,
                   metadata: Mapping[str, Any], force: bool = False, opset: int = OPSET,
                   rewrite_convs: bool = True, rewrite_transposed: bool | None = None,
-                  rewrite_narrow: bool | None = None, rewrite_winograd: bool | None = None) -> Path:
+                  rewrite_narrow: bool | None = None, rewrite_winograd: bool | None = None,
+                  rewrite_polyphase: bool | None = None) -> Path:
     """Export ``model`` at ``size`` (W, H) and ``iters`` into one ONNX file carrying ``metadata``
     (plus ``metadata["export"]`` ``"conv3d_as_2d" = rewrite_convs``, ``"conv_transpose3d_as_2d" =
-    rewrite_transposed``, ``"narrow_conv3d_as_2d" = rewrite_narrow`` and ``"conv3d_depth_winograd" =
-    rewrite_winograd``, the last three defaulting to ``rewrite_convs``; ``model`` itself is not changed).
+    rewrite_transposed``, ``"narrow_conv3d_as_2d" = rewrite_narrow``, ``"conv3d_depth_winograd" =
+    rewrite_winograd`` and ``"conv_transpose3d_polyphase" = rewrite_polyphase``, the last four defaulting
+    to ``rewrite_convs``; ``model`` itself is not changed).
 
     Raises:
         SpaceposeError: ``path`` exists and ``force`` is False, or the graph holds a forbidden op.
@@ -90,9 +95,11 @@ def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int,
     flags = {"conv3d_as_2d": bool(rewrite_convs),
              "conv_transpose3d_as_2d": bool(rewrite_convs if rewrite_transposed is None else rewrite_transposed),
              "narrow_conv3d_as_2d": bool(rewrite_convs if rewrite_narrow is None else rewrite_narrow),
-             "conv3d_depth_winograd": bool(rewrite_convs if rewrite_winograd is None else rewrite_winograd)}
+             "conv3d_depth_winograd": bool(rewrite_convs if rewrite_winograd is None else rewrite_winograd),
+             "conv_transpose3d_polyphase": bool(rewrite_convs if rewrite_polyphase is None else rewrite_polyphase)}
     rewritten = (rewrite_conv3d(model, convs=flags["conv3d_as_2d"], transposed=flags["conv_transpose3d_as_2d"],
-                                narrow=flags["narrow_conv3d_as_2d"], winograd=flags["conv3d_depth_winograd"])
+                                narrow=flags["narrow_conv3d_as_2d"], winograd=flags["conv3d_depth_winograd"],
+                                polyphase=flags["conv_transpose3d_polyphase"])
                  if any(flags.values()) else model)
     wrapper = StereoExportWrapper(rewritten, iters).eval()
     metadata = {**metadata, "export": {**dict(metadata.get("export") or {}), **flags}}

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import itertools
 import logging
 import os
 import tempfile
@@ -34,7 +35,7 @@ import torch
 from torch import nn
 
 from spacepose.errors import SpaceposeError
-from spacepose.export.conv3d_as_2d import WINOGRAD_G
+from spacepose.export.conv3d_as_2d import WINOGRAD_G, polyphase_kernel_index
 
 __all__ = ["RecoveryReport", "recover_state_dict", "freeze_batchnorm", "checkpoint_from_graph", "checkpoint_folds_bn"]
 
@@ -126,13 +127,27 @@ def _tap_combinations(kd: int) -> list[np.ndarray]:
     return [m for base in bases for m in [base[i:i + 1] for i in range(len(base))] + [base]]
 
 
+def _polyphase_indices(shape: tuple[int, ...], value_shape: tuple[int, ...]) -> list[np.ndarray]:
+    """The kernel layouts :class:`~spacepose.export.conv3d_as_2d.PolyphaseConvTranspose3dAs2d` could give a
+    ``ConvTranspose3d`` weight of ``shape`` as a 2-D kernel of ``value_shape``: one flat-index array per
+    stride (each a divisor of its kernel axis) that yields that shape."""
+    divisors = [[s for s in range(1, k + 1) if k % s == 0] for k in shape[2:]]
+    out = []
+    for stride in itertools.product(*divisors):
+        if (stride[0] * shape[1] * stride[1] * stride[2], shape[2] // stride[0] * shape[0],
+                shape[3] // stride[1], shape[4] // stride[2]) == tuple(value_shape):
+            out.append(polyphase_kernel_index(shape, stride))
+    return out
+
+
 def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, object] | None:
     """The state key whose values are closest to ``value``, within 1 % (a folded BatchNorm scales a
     convolution by its probe gamma, 1 +- 0.3 %), and how it is laid out: ``"flat"`` (same values,
-    flattened), ``"T"`` (a 2-D transpose) or ``("taps", M)``: the combinations ``sum_j M[i, j] ref[:, :, j]``
+    flattened), ``"T"`` (a 2-D transpose), ``("taps", M)``: the combinations ``sum_j M[i, j] ref[:, :, j]``
     of the depth taps of a 5-D convolution weight, stacked along the outputs (one tap, the taps
     stacked, a Winograd kernel transform row, or all of them, as :mod:`spacepose.export.conv3d_as_2d`
-    exports them; :func:`_tap_combinations`)."""
+    exports them; :func:`_tap_combinations`), or ``("index", I)``: ``ref.flat[I]``, a permutation of a
+    transposed convolution's weight (the polyphase kernel; :func:`_polyphase_indices`)."""
     flat = value.reshape(-1).astype(np.float64)
     scale = float(np.max(np.abs(flat))) + 1e-12
     best: tuple[float, str, object] | None = None
@@ -142,6 +157,9 @@ def _match(value: np.ndarray, candidates: dict[str, np.ndarray]) -> tuple[str, o
             options.append((ref.reshape(-1), "flat"))
             if ref.ndim == 2 and value.shape == ref.shape[::-1]:
                 options.append((ref.T.reshape(-1), "T"))
+        if ref.ndim == 5 and value.ndim == 4 and ref.size == flat.size:
+            flat_ref = ref.reshape(-1)
+            options.extend((flat_ref[idx].reshape(-1), ("index", idx)) for idx in _polyphase_indices(ref.shape, value.shape))
         if ref.ndim == 5 and value.ndim == 4 and ref.shape[2] > 1:
             taps = np.moveaxis(ref, 2, 0)                               # (kd, C_out, C_in, kh, kw)
             for m in _tap_combinations(ref.shape[2]):
@@ -214,6 +232,11 @@ def recover_state_dict(model: nn.Module, onnx_path: str | os.PathLike,
                     continue                            # a folded scalar constant (eps, scale)
                 raise SpaceposeError(f"{onnx_path}: initializer {name_b} {list(value_b.shape)} has no source parameter")
             key, layout = found
+        if isinstance(layout, tuple) and layout[0] == "index":  # a permutation of the weight
+            value = np.empty(state[key].numel(), dtype=np.float32)
+            value[layout[1].reshape(-1)] = np.asarray(value_b).reshape(-1)
+            assigned[key] = value.reshape(state[key].shape)
+            continue
         if isinstance(layout, tuple):                   # combinations of depth taps, stacked along the outputs
             rows = layout[1]
             for row, part in zip(rows, np.asarray(value_b).reshape(len(rows), -1)):
@@ -305,7 +328,8 @@ def checkpoint_from_graph(onnx_path: str | os.PathLike) -> dict:
             m, p, size=size, iters=iters, metadata={}, force=True, rewrite_convs=bool(flags.get("conv3d_as_2d")),
             rewrite_transposed=bool(flags.get("conv_transpose3d_as_2d")),
             rewrite_narrow=bool(flags.get("narrow_conv3d_as_2d")),
-            rewrite_winograd=bool(flags.get("conv3d_depth_winograd"))), prefix="model.")
+            rewrite_winograd=bool(flags.get("conv3d_depth_winograd")),
+            rewrite_polyphase=bool(flags.get("conv_transpose3d_polyphase"))), prefix="model.")
         diff = onnx_stereo.parity_check(model, onnx_path, size=size, iters=iters)
         tolerance = 1e-3
         ckpt = {"kind": "stereo", "stereo_config": config.to_dict()}

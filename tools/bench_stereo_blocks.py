@@ -116,7 +116,8 @@ def bench_blocks(model, flags: dict[str, bool], size: tuple[int, int], iters: in
     fast = rewrite_conv3d(model, convs=flags.get("conv3d_as_2d", True),
                           transposed=flags.get("conv_transpose3d_as_2d", True),
                           narrow=flags.get("narrow_conv3d_as_2d", True),
-                          winograd=flags.get("conv3d_depth_winograd", True))
+                          winograd=flags.get("conv3d_depth_winograd", True),
+                          polyphase=flags.get("conv_transpose3d_polyphase", True))
     left, right = (torch.from_numpy(a) for a in parity_inputs(size))
 
     class Prefix(nn.Module):
@@ -187,7 +188,8 @@ def main(argv: list[str] | None = None) -> int:
 
         meta = read_metadata(args.graph)
         flags = {k: bool(v) for k, v in (meta.get("export") or {}).items()}
-        for key in ("conv3d_as_2d", "conv_transpose3d_as_2d", "narrow_conv3d_as_2d", "conv3d_depth_winograd"):
+        for key in ("conv3d_as_2d", "conv_transpose3d_as_2d", "narrow_conv3d_as_2d", "conv3d_depth_winograd",
+                    "conv_transpose3d_polyphase"):
             flags.setdefault(key, False)            # an option absent from an older graph's metadata was off
         size, iters = tuple(int(v) for v in meta["input_size"]), int(meta["iters"])
     rows = bench_blocks(model, flags, size, iters, threads=args.threads, calls=args.calls)

@@ -13,9 +13,10 @@ from torch import nn  # noqa: E402
 
 from spacepose.export.conv3d_as_2d import (WINOGRAD_AT, WINOGRAD_BT, WINOGRAD_G,  # noqa: E402
                                             Conv3dAs2d, ConvTranspose3dAs2d, NarrowConv3dAs2d,
-                                            WinogradConv3dAs2d, rewrite_conv3d, wants_narrow_rewrite,
-                                            wants_rewrite, wants_transposed_rewrite, wants_winograd_rewrite,
-                                            winograd_depth_transforms)
+                                            PolyphaseConvTranspose3dAs2d, WinogradConv3dAs2d,
+                                            polyphase_kernel_index, rewrite_conv3d, wants_narrow_rewrite,
+                                            wants_polyphase_rewrite, wants_rewrite, wants_transposed_rewrite,
+                                            wants_winograd_rewrite, winograd_depth_transforms)
 
 CASES = [  # (in, out, kernel, stride, padding, groups, bias, input shape)
     (8, 8, 5, 1, 2, 8, True, (1, 8, 6, 9, 10)),        # SECA key: depthwise 5x5x5
@@ -278,3 +279,73 @@ def test_winograd_rewrite_is_opt_in_takes_the_dense_layers_and_folds_batchnorm()
         WinogradConv3dAs2d(nn.Conv3d(2, 2, 3, 2, 1))
     with pytest.raises(ValueError, match="3 depth taps"):
         WinogradConv3dAs2d(nn.Conv3d(2, 2, (5, 3, 3), 1, 1))
+
+
+POLYPHASE = [  # (in, out, kernel, stride, padding, output padding, bias, input shape): kernel a multiple of stride
+    (16, 16, 4, 2, 1, 0, False, (1, 16, 6, 10, 12)),                 # the regulariser's decoder upsampler
+    (3, 5, 4, 2, 1, 0, True, (2, 3, 3, 5, 4)),                       # batch 2, odd sizes
+    (3, 5, 2, 2, 0, 0, True, (1, 3, 3, 4, 5)),                       # kernel = stride: no overlap
+    (3, 4, 6, 3, 2, 0, True, (1, 3, 3, 4, 4)),                       # stride 3
+    (3, 4, (4, 2, 6), (2, 1, 3), (1, 0, 2), 0, True, (1, 3, 4, 5, 3)),  # anisotropic, no spatial stride in H
+    (2, 3, 4, 2, 0, 1, True, (1, 2, 3, 4, 4)),                       # output padding
+    (2, 3, 6, 2, (0, 1, 0), (1, 0, 1), True, (1, 2, 3, 3, 3)),       # output padding per axis
+    (2, 3, 4, 2, 3, 0, True, (1, 2, 4, 4, 5)),                       # padding beyond one stride
+    (2, 3, 3, 1, 1, 0, True, (1, 2, 4, 4, 5)),                       # stride 1: a plain convolution
+    (2, 2, 4, 4, 0, 0, True, (1, 2, 2, 3, 3)),                       # kernel = stride = 4
+]
+
+
+@pytest.mark.parametrize("case", POLYPHASE, ids=lambda c: f"k{c[2]}s{c[3]}p{c[4]}op{c[5]}")
+def test_polyphase_matches_conv_transpose3d_in_torch_and_onnxruntime(case):
+    *args, bias, shape = case
+    conv = _transposed(*args, 1, bias, seed=7)
+    x = torch.randn(shape)
+    _assert_same_in_torch(conv, PolyphaseConvTranspose3dAs2d(conv), x)
+    proto = _assert_same_in_onnxruntime(conv, PolyphaseConvTranspose3dAs2d(conv), x)
+    assert len(_kernels(proto, "Conv")) == 1                                 # one 2-D convolution
+    assert all(len(k) == 2 for k in _kernels(proto, "ConvTranspose"))       # the pixel shuffle, if any
+    initializers = {i.name for i in proto.graph.initializer}
+    conv_node = next(n for n in proto.graph.node if n.op_type == "Conv")
+    assert conv_node.input[1] in initializers                              # the kernel folded into one initializer
+    assert not any(n.op_type in ("Gather", "GatherElements") for n in proto.graph.node)
+
+
+def test_polyphase_kernel_is_a_permutation_of_the_weight():
+    """The kernel the module builds is ``weight.flat[polyphase_kernel_index]``, and the index holds every
+    weight value exactly once (how recovery reads the weight back)."""
+    for k, s in [(4, 2), ((4, 2, 6), (2, 1, 3)), (6, 3), (2, 2), (3, 1)]:
+        conv = nn.ConvTranspose3d(3, 5, k, s)
+        index = polyphase_kernel_index(tuple(conv.weight.shape), conv.stride)
+        assert np.array_equal(np.sort(index.reshape(-1)), np.arange(conv.weight.numel()))
+        kernel = PolyphaseConvTranspose3dAs2d(conv)._kernel2d()
+        assert torch.equal(kernel, conv.weight.detach().reshape(-1)[torch.from_numpy(index)])
+    with pytest.raises(ValueError, match="multiple of stride"):
+        polyphase_kernel_index((3, 5, 4, 4, 4), (3, 2, 2))
+
+
+def test_polyphase_rewrite_takes_ungrouped_transposed_layers_and_folds_batchnorm():
+    torch.manual_seed(4)
+    model = nn.Sequential(nn.ConvTranspose3d(8, 6, 4, 2, 1, bias=False), nn.BatchNorm3d(6), nn.LeakyReLU(0.2),
+                          nn.ConvTranspose3d(6, 6, 4, 2, 1, groups=2),   # grouped: per-tap form
+                          nn.ConvTranspose3d(6, 6, 3, 2, 1)).eval()      # kernel not a multiple: per-tap form
+    with torch.no_grad():
+        model[1].weight.uniform_(0.5, 1.5)
+        model[1].bias.normal_()
+        model[1].running_mean.normal_()
+        model[1].running_var.uniform_(0.5, 2.0)
+    assert [type(m) for m in rewrite_conv3d(model, transposed=True)][0] is ConvTranspose3dAs2d
+    out = rewrite_conv3d(model, transposed=True, polyphase=True)
+    assert [type(m) for m in out] == [PolyphaseConvTranspose3dAs2d, nn.Identity, nn.LeakyReLU, ConvTranspose3dAs2d,
+                                      ConvTranspose3dAs2d]
+    assert [type(m) for m in rewrite_conv3d(model, polyphase=True)][3:] == [nn.ConvTranspose3d, nn.ConvTranspose3d]
+    assert [wants_polyphase_rewrite(m) for m in model] == [True, False, False, False, False]
+    assert list(out.state_dict()) == list(rewrite_conv3d(model, transposed=True).state_dict())  # no keys of its own
+    x = torch.randn(1, 8, 3, 4, 5)
+    with torch.no_grad():
+        assert float(torch.max(torch.abs(out(x) - model(x)))) < 1e-4
+    with pytest.raises(ValueError, match="ungrouped"):
+        PolyphaseConvTranspose3dAs2d(nn.ConvTranspose3d(2, 2, 4, 2, groups=2))
+    with pytest.raises(ValueError, match="multiple of the stride"):
+        PolyphaseConvTranspose3dAs2d(nn.ConvTranspose3d(2, 2, 3, 2))
+    with pytest.raises(ValueError, match="dilation"):
+        PolyphaseConvTranspose3dAs2d(nn.ConvTranspose3d(2, 2, 4, 2, dilation=2))

@@ -39,7 +39,7 @@ def test_metadata_roundtrip(exported):
     assert got["variant"] == "full" and got["max_disp"] == 96 and got["dataset"] == {"seed": 7, "size": 10}
     assert "training_commit" in got and got["config"]["variant"] == "full"
     assert got["export"] == {"conv3d_as_2d": True, "conv_transpose3d_as_2d": True, "narrow_conv3d_as_2d": True,
-                             "conv3d_depth_winograd": True}
+                             "conv3d_depth_winograd": True, "conv_transpose3d_polyphase": True}
 
 
 def test_grouped_3d_convs_are_exported_as_2d(exported):
@@ -54,9 +54,11 @@ def test_grouped_3d_convs_are_exported_as_2d(exported):
     assert conv3d and all(a["kernel_shape"] == [1, 1, 1] for a, _ in conv3d)
     assert any(len(a["kernel_shape"]) == 2 and w[0] == 3 for a, w in convs)        # the stacked classifier
     assert any(len(a["kernel_shape"]) == 2 and a.get("group", 1) > 1 for a, _ in convs)
-    transposed = [n for n in proto.graph.node if n.op_type == "ConvTranspose"]   # the decoder upsamplers: 2-D
-    assert transposed and all(len(onnx.helper.get_attribute_value(a)) == 2
-                              for n in transposed for a in n.attribute if a.name == "kernel_shape")
+    transposed = [{a.name: onnx.helper.get_attribute_value(a) for a in n.attribute}
+                  for n in proto.graph.node if n.op_type == "ConvTranspose"]
+    # the decoder upsamplers in the polyphase form: only their 0/1 pixel shuffles are transposed convolutions
+    assert len(transposed) == 3 and all(a["kernel_shape"] == [2, 2] and a["strides"] == [2, 2] and a["group"] > 1
+                                        for a in transposed)
     assert not any(n.op_type == "BatchNormalization" for n in proto.graph.node)    # folded into them
     winograd = [n for n in proto.graph.node if n.op_type == "MatMul" and "/regularizer/stem/" in n.name]
     assert len(winograd) == 4                                  # the two dense stem convs: T_in and T_out each

@@ -120,7 +120,7 @@ def test_checkpoint_from_graph_without_conv_rewrite(tmp_path, convs):
     meta = stereo_metadata(input_size=SIZE, iters=ITERS, stereo_config=cfg.to_dict(), dataset={"seed": 1, "size": 4})
     path = onnx_stereo.export_stereo(model, tmp_path / "plain.onnx", size=SIZE, iters=ITERS, metadata=meta,
                                      rewrite_convs=convs, rewrite_transposed=False, rewrite_narrow=False,
-                                     rewrite_winograd=False)
+                                     rewrite_winograd=False, rewrite_polyphase=False)
     nodes = onnx.load(str(path)).graph.node
     grouped_2d = any(n.op_type == "Conv" and any(a.name == "group" and a.i > 1 for a in n.attribute)
                      and _kernel_dims(n) == 2 for n in nodes)
@@ -187,19 +187,23 @@ def test_checkpoint_from_graph_rejects_foreign_graph(tmp_path):
         checkpoint_from_graph(path)
 
 
-def test_checkpoint_from_session13_graph_form(tmp_path):
-    """A graph with every 3-D convolution in the per-tap 2-D form and no Winograd one (the shipped graph of
-    session 13) still recovers, and re-exported in the Winograd form it computes the same disparity."""
+@pytest.mark.parametrize("winograd", [False, True], ids=["session13", "session14"])
+def test_checkpoint_from_older_graph_forms(tmp_path, winograd):
+    """Graphs with the transposed convolutions as per-tap 2-D ones (no polyphase form), with every 3-D
+    convolution in the per-tap 2-D form (session 13) or the dense ones in the Winograd form (session 14),
+    still recover, and re-exported in the current form they compute the same disparity."""
     torch.manual_seed(0)
     cfg = StereoConfig.cpu()
     model = randomise_batchnorm(TSCAStereo(cfg), 8)
     meta = stereo_metadata(input_size=SIZE, iters=ITERS, stereo_config=cfg.to_dict(), dataset={"seed": 1, "size": 4})
-    path = onnx_stereo.export_stereo(model, tmp_path / "s13.onnx", size=SIZE, iters=ITERS, metadata=meta,
-                                     rewrite_winograd=False)
-    assert not any(n.op_type == "MatMul" and "/regularizer/" in n.name for n in onnx.load(str(path)).graph.node)
+    path = onnx_stereo.export_stereo(model, tmp_path / "old.onnx", size=SIZE, iters=ITERS, metadata=meta,
+                                     rewrite_winograd=winograd, rewrite_polyphase=False)
+    nodes = onnx.load(str(path)).graph.node
+    assert winograd == any(n.op_type == "MatMul" and "/regularizer/" in n.name for n in nodes)
+    assert {_kernel_dims(n) for n in nodes if n.op_type == "ConvTranspose"} == {2}
     ckpt = checkpoint_from_graph(path)
     assert ckpt["parity"] < 1e-3
     again = TSCAStereo(cfg).eval()
     again.load_state_dict(ckpt["model"])
-    new = onnx_stereo.export_stereo(again, tmp_path / "s14.onnx", size=SIZE, iters=ITERS, metadata=meta)
+    new = onnx_stereo.export_stereo(again, tmp_path / "new.onnx", size=SIZE, iters=ITERS, metadata=meta)
     assert onnx_stereo.parity_check(model, new, size=SIZE, iters=ITERS) < 1e-3

@@ -35,7 +35,7 @@ def old_stereo(tmp_path_factory):
                            metrics={"epe": 1.25}, extra={"training": {"step": 77}})
     path = tmp_path_factory.mktemp("old") / "stereo.onnx"
     onnx_stereo.export_stereo(model, path, size=SIZE, iters=ITERS, metadata=meta, rewrite_transposed=False,
-                              rewrite_narrow=False)
+                              rewrite_narrow=False, rewrite_polyphase=False)
     return path, model
 
 
@@ -53,7 +53,8 @@ def test_stereo_graph_comes_back_in_the_new_form(old_stereo, tmp_path):
     assert _transposed_dims(path) == [3] and _transposed_dims(out) == [2]
     assert result["kind"] == "stereo" and result["export"] == {"conv3d_as_2d": True, "conv_transpose3d_as_2d": True,
                                                                "narrow_conv3d_as_2d": True,
-                                                               "conv3d_depth_winograd": True}
+                                                               "conv3d_depth_winograd": True,
+                                                               "conv_transpose3d_polyphase": True}
     assert max(result["recovery_parity"], result["torch_parity"], result["graph_parity"]) < 1e-3
     old_meta, new_meta = read_metadata(path), read_metadata(out)
     for key in ("dataset", "metrics", "training", "config", "input_size", "iters", "max_disp", "training_commit"):
