@@ -18,7 +18,7 @@ from spacepose.calibration.rig import paper_rig, save_rig  # noqa: E402
 from spacepose.errors import SpaceposeError  # noqa: E402
 from spacepose.estimator import PoseEstimator  # noqa: E402
 from spacepose.export.onnx_stereo import export_random_stereo, parity_inputs  # noqa: E402
-from spacepose.export.quantize import (convert_fp16, quantize_bundle, quantize_int8,  # noqa: E402
+from spacepose.export.quantize import (convert_fp16, polyphase_nodes, quantize_bundle, quantize_int8,  # noqa: E402
                                        record_calibration_feeds, winograd_nodes)
 from spacepose.imageio import write_image  # noqa: E402
 from spacepose.onnx_session import make_session, session_metadata  # noqa: E402
@@ -48,10 +48,14 @@ def test_int8_graph_is_quantized_close_and_keeps_the_contract(stereo_graph, tmp_
     # an untrained graph gives small disparities; int8 must stay within a few percent of their spread
     assert np.abs(got - ref).mean() < 0.1 * (np.abs(ref).mean() + 1e-3) + 0.05
     assert meta["precision"]["precision"] == "int8" and meta["precision"]["calibration_inputs"] == 4
-    # the Winograd depth form (two dense stem layers, one 1/4-resolution decoder layer) stays float32
-    kept = winograd_nodes(onnx.load(str(stereo_graph)))
-    assert [n.split("/")[-1].rstrip("_1") for n in kept] == ["MatMul", "Conv", "MatMul"] * 3
-    assert meta["precision"]["float32_nodes"] == 9
+    # the Winograd depth form (two dense stem layers, one 1/4-resolution decoder layer) and the polyphase
+    # convolutions of the three decoder upsamplers stay float32
+    graph = onnx.load(str(stereo_graph))
+    assert [n.split("/")[-1].rstrip("_1") for n in winograd_nodes(graph)] == ["MatMul", "Conv", "MatMul"] * 3
+    polyphase = polyphase_nodes(graph)
+    assert len(polyphase) == 3 and all("/decoders." in n and "/up/" in n and n.endswith("/Conv") for n in polyphase)
+    kept = winograd_nodes(graph) + polyphase
+    assert meta["precision"]["float32_nodes"] == 12
     quantized = onnx.load(str(dst))
     produced_by = {o: n.op_type for n in quantized.graph.node for o in n.output}
     for node in quantized.graph.node:
