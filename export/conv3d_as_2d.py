@@ -346,8 +346,8 @@ class PolyphaseConvTranspose3dAs2d(_DepthTaps):
 
     def _kernel2d(self) -> torch.Tensor:
         """The 2-D kernel (s_d C_out s_h s_w, q_d C_in, q_h, q_w), ``weight.flat[polyphase_kernel_index(...)]``
-        written as reshape / flip / permute of the weight (tap j = sigma + (q - 1 - t) s), which the export
-        folds into one initializer."""
+        written as a reshape, a reversal of the tap axes by slices and a permutation of the weight (tap
+        j = sigma + (q - 1 - t) s), which the export folds into one initializer."""
         c_in, c_out = self.weight.shape[:2]
         (qd, qh, qw), (sd, sh, sw) = (k // s for k, s in zip(self.kernel, self.stride)), self.stride
         w = self.weight.reshape(c_in, c_out, qd, sd, qh, sh, qw, sw)

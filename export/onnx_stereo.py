@@ -81,8 +81,9 @@ def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int,
     """Export ``model`` at ``size`` (W, H) and ``iters`` into one ONNX file carrying ``metadata``
     (plus ``metadata["export"]`` ``"conv3d_as_2d" = rewrite_convs``, ``"conv_transpose3d_as_2d" =
     rewrite_transposed``, ``"narrow_conv3d_as_2d" = rewrite_narrow``, ``"conv3d_depth_winograd" =
-    rewrite_winograd`` and ``"conv_transpose3d_polyphase" = rewrite_polyphase``, the last four defaulting
-    to ``rewrite_convs``; ``model`` itself is not changed).
+    rewrite_winograd`` and ``"conv_transpose3d_polyphase" = rewrite_polyphase``, the middle three defaulting
+    to ``rewrite_convs`` and the last to ``rewrite_transposed``: the polyphase form, where it applies, takes
+    the place of the per-tap form of the transposed convolutions; ``model`` itself is not changed).
 
     Raises:
         SpaceposeError: ``path`` exists and ``force`` is False, or the graph holds a forbidden op.
@@ -96,7 +97,9 @@ def export_stereo(model: nn.Module, path: str | os.PathLike, *, size: tuple[int,
              "conv_transpose3d_as_2d": bool(rewrite_convs if rewrite_transposed is None else rewrite_transposed),
              "narrow_conv3d_as_2d": bool(rewrite_convs if rewrite_narrow is None else rewrite_narrow),
              "conv3d_depth_winograd": bool(rewrite_convs if rewrite_winograd is None else rewrite_winograd),
-             "conv_transpose3d_polyphase": bool(rewrite_convs if rewrite_polyphase is None else rewrite_polyphase)}
+             "conv_transpose3d_polyphase": None}
+    flags["conv_transpose3d_polyphase"] = bool(flags["conv_transpose3d_as_2d"] if rewrite_polyphase is None
+                                               else rewrite_polyphase)
     rewritten = (rewrite_conv3d(model, convs=flags["conv3d_as_2d"], transposed=flags["conv_transpose3d_as_2d"],
                                 narrow=flags["narrow_conv3d_as_2d"], winograd=flags["conv3d_depth_winograd"],
                                 polyphase=flags["conv_transpose3d_polyphase"])
