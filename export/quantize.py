@@ -97,20 +97,27 @@ def _copy_metadata(src: Path, dst: Path, precision: str, extra: dict[str, Any]) 
     onnx.save(model, str(dst))
 
 
+def _constants(model) -> dict[str, np.ndarray]:
+    """The constant tensors of the ONNX ``model`` by name: its initializers and the outputs of its
+    ``Constant`` nodes."""
+    from onnx import numpy_helper
+
+    consts = {i.name: numpy_helper.to_array(i) for i in model.graph.initializer}
+    for node in model.graph.node:
+        if node.op_type == "Constant" and node.attribute and node.attribute[0].name == "value":
+            consts[node.output[0]] = numpy_helper.to_array(node.attribute[0].t)
+    return consts
+
+
 def winograd_nodes(model) -> list[str]:
     """Names of the nodes of the Winograd depth form (:class:`spacepose.export.conv3d_as_2d.WinogradConv3dAs2d`)
     in the ONNX ``model``: the ``MatMul`` nodes whose constant operand is a depth transform
     (:func:`~spacepose.export.conv3d_as_2d.winograd_depth_transforms`) and the convolution between
     them. Their transforms widen the value range (coefficients up to 8), so int8 loses more there than
     anywhere else; :func:`quantize_int8` leaves them in float32."""
-    from onnx import numpy_helper
-
     from spacepose.export.conv3d_as_2d import winograd_depth_transforms
 
-    consts = {i.name: numpy_helper.to_array(i) for i in model.graph.initializer}
-    for node in model.graph.node:
-        if node.op_type == "Constant" and node.attribute and node.attribute[0].name == "value":
-            consts[node.output[0]] = numpy_helper.to_array(node.attribute[0].t)
+    consts = _constants(model)
 
     def is_transform(name: str) -> bool:
         a = consts.get(name)
@@ -155,12 +162,7 @@ def polyphase_nodes(model) -> list[str]:
     none and 1 with them in float32, at about the same EPE, 1.83 against 1.85 px), and the per-tap form
     they replace was never quantized (``ConvTranspose`` is not among the quantized op types), so
     :func:`quantize_int8` leaves them in float32."""
-    from onnx import numpy_helper
-
-    consts = {i.name: numpy_helper.to_array(i) for i in model.graph.initializer}
-    for node in model.graph.node:
-        if node.op_type == "Constant" and node.attribute and node.attribute[0].name == "value":
-            consts[node.output[0]] = numpy_helper.to_array(node.attribute[0].t)
+    consts = _constants(model)
     producer = {o: node for node in model.graph.node for o in node.output}
     names: list[str] = []
     for node in model.graph.node:

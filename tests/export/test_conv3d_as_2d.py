@@ -1,6 +1,8 @@
 """The 2-D form of grouped / strided Conv3d layers computes what nn.Conv3d computes, in torch and in onnxruntime."""
 
 import io
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +12,9 @@ onnx = pytest.importorskip("onnx")
 ort = pytest.importorskip("onnxruntime")
 
 from torch import nn  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # --import-mode=importlib: find the helpers
+from _export_fixtures import randomise_batchnorm  # noqa: E402
 
 from spacepose.export.conv3d_as_2d import (WINOGRAD_AT, WINOGRAD_BT, WINOGRAD_G,  # noqa: E402
                                             Conv3dAs2d, ConvTranspose3dAs2d, NarrowConv3dAs2d,
@@ -99,12 +104,7 @@ def test_batchnorm_after_a_rewritten_layer_is_folded():
     torch.manual_seed(3)
     model = nn.Sequential(nn.Conv3d(8, 8, 3, 2, 1, groups=8, bias=False), nn.BatchNorm3d(8), nn.LeakyReLU(0.2),
                           nn.Conv3d(8, 8, 1), nn.BatchNorm3d(8)).eval()
-    with torch.no_grad():
-        for bn in (model[1], model[4]):
-            bn.weight.uniform_(0.5, 1.5)
-            bn.bias.normal_()
-            bn.running_mean.normal_()
-            bn.running_var.uniform_(0.5, 2.0)
+    randomise_batchnorm(model, 3)
     out = rewrite_conv3d(model)
     assert isinstance(out[0], Conv3dAs2d) and isinstance(out[1], nn.Identity)
     assert isinstance(out[4], nn.BatchNorm3d)                                # after a kept 1x1x1 conv: untouched
@@ -155,11 +155,7 @@ def test_transposed_rewrite_is_opt_in_and_folds_batchnorm():
     torch.manual_seed(4)
     model = nn.Sequential(nn.ConvTranspose3d(8, 6, 4, 2, 1, groups=2, bias=False), nn.BatchNorm3d(6),
                           nn.LeakyReLU(0.2), nn.Conv3d(6, 8, 3, 1, 1)).eval()
-    with torch.no_grad():
-        model[1].weight.uniform_(0.5, 1.5)
-        model[1].bias.normal_()
-        model[1].running_mean.normal_()
-        model[1].running_var.uniform_(0.5, 2.0)
+    randomise_batchnorm(model, 4)
     kinds = lambda m: [type(c) for c in m]  # noqa: E731
     assert kinds(rewrite_conv3d(model)) == [nn.ConvTranspose3d, nn.BatchNorm3d, nn.LeakyReLU, Conv3dAs2d]
     assert kinds(rewrite_conv3d(model, convs=False, transposed=True)) == [ConvTranspose3dAs2d, nn.Identity,
@@ -261,11 +257,7 @@ def test_winograd_rewrite_is_opt_in_takes_the_dense_layers_and_folds_batchnorm()
                           nn.Conv3d(8, 8, 3, 2, 1),               # depth stride 2: per-tap form
                           nn.Conv3d(8, 8, 5, 1, 2),               # 5 depth taps: per-tap form
                           nn.Conv3d(8, 1, 3, 1, 1)).eval()        # narrow: kept
-    with torch.no_grad():
-        model[1].weight.uniform_(0.5, 1.5)
-        model[1].bias.normal_()
-        model[1].running_mean.normal_()
-        model[1].running_var.uniform_(0.5, 2.0)
+    randomise_batchnorm(model, 4)
     assert type(rewrite_conv3d(model)[0]) is Conv3dAs2d
     out = rewrite_conv3d(model, winograd=True)
     assert [type(m) for m in out] == [WinogradConv3dAs2d, nn.Identity, nn.LeakyReLU, Conv3dAs2d, Conv3dAs2d,
@@ -328,11 +320,7 @@ def test_polyphase_rewrite_takes_ungrouped_transposed_layers_and_folds_batchnorm
     model = nn.Sequential(nn.ConvTranspose3d(8, 6, 4, 2, 1, bias=False), nn.BatchNorm3d(6), nn.LeakyReLU(0.2),
                           nn.ConvTranspose3d(6, 6, 4, 2, 1, groups=2),   # grouped: per-tap form
                           nn.ConvTranspose3d(6, 6, 3, 2, 1)).eval()      # kernel not a multiple: per-tap form
-    with torch.no_grad():
-        model[1].weight.uniform_(0.5, 1.5)
-        model[1].bias.normal_()
-        model[1].running_mean.normal_()
-        model[1].running_var.uniform_(0.5, 2.0)
+    randomise_batchnorm(model, 4)
     assert [type(m) for m in rewrite_conv3d(model, transposed=True)][0] is ConvTranspose3dAs2d
     out = rewrite_conv3d(model, transposed=True, polyphase=True)
     assert [type(m) for m in out] == [PolyphaseConvTranspose3dAs2d, nn.Identity, nn.LeakyReLU, ConvTranspose3dAs2d,
