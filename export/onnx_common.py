@@ -58,8 +58,9 @@ def check_overwrite(path: str | os.PathLike, force: bool) -> Path:
 
 def export_onnx_file(module: nn.Module, args: tuple[torch.Tensor, ...], out: Path, *, input_names: Sequence[str],
                      output_names: Sequence[str], metadata: Mapping[str, Any], opset: int = OPSET,
-                     graph_name: str = "graph"):
+                     graph_name: str = "graph", dynamic_axes: Mapping[str, Mapping[int, str]] | None = None):
     """Trace ``module(*args)`` (legacy exporter, no external data) into ``out`` with ``metadata``; -> the proto.
+    ``dynamic_axes``: torch.onnx's, for graphs with a free batch axis.
 
     The file appears atomically, and only when the graph holds none of ``FORBIDDEN_OPS`` and passes
     the ONNX checker (SpaceposeError names the forbidden ops otherwise).
@@ -73,7 +74,8 @@ def export_onnx_file(module: nn.Module, args: tuple[torch.Tensor, ...], out: Pat
             warnings.simplefilter("ignore")  # tracer/constant-folding chatter; parity is checked instead
             torch.onnx.export(module, args, str(raw), input_names=list(input_names),
                               output_names=list(output_names), opset_version=opset, dynamo=False,
-                              do_constant_folding=True, external_data=False)
+                              do_constant_folding=True, external_data=False,
+                              dynamic_axes=None if dynamic_axes is None else {k: dict(v) for k, v in dynamic_axes.items()})
         proto = onnx.load(str(raw))
         bad = forbidden_ops(proto)
         if bad:

@@ -11,7 +11,8 @@ folder (the source is never modified) whose ``stereo.onnx`` and ``pose.onnx`` ar
   (``onnxruntime.transformers.float16``); smaller files, but x86 CPUs have few fp16 kernels, so
   onnxruntime inserts casts and it is usually slower there (measure with ``spacepose profile``).
 
-Each graph keeps the metadata contract, with a ``precision`` entry added; ``bundle.json`` is copied
+A bundle's flip classifier (``flip_classifier``) is copied as it is, float32: it decides flips, and a
+quantized decision-maker let a flip through before (model card). Each graph keeps the metadata contract, with a ``precision`` entry added; ``bundle.json`` is copied
 unchanged, and the model card is the source's under a header that says how this copy was made and
 that the numbers below it are those of the float32 graphs. The accuracy cost is measured with the project's own commands on the new folder
 (``spacepose eval-stereo DATASET --bundle DIR``, ``spacepose eval-pose DATASET --bundle DIR``).
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import json
 import logging
+import shutil
 import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -245,6 +247,8 @@ def quantize_bundle(bundle_dir: str | Path | None, out: str | Path, precision: s
     else:
         convert_fp16(stereo_src, out / stereo_src.name)
         convert_fp16(pose_src, out / pose_src.name)
+    if src.flip_classifier is not None:   # small, and it decides flips: it stays float32 (model card)
+        shutil.copyfile(src_dir / src.flip_classifier.file, out / src.flip_classifier.file)
     manifest = json.loads((src_dir / "bundle.json").read_text())
     (out / "bundle.json").write_text(json.dumps(manifest, indent=1) + "\n")
     card = (src_dir / "MODEL_CARD.md").read_text(encoding="utf-8") if (src_dir / "MODEL_CARD.md").exists() else ""

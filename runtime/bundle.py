@@ -44,6 +44,10 @@ A bundle is a folder::
                                        # target.silhouette_points: the outline decides between the
                                        # registered pose and its flip (spacepose.silhouette.
                                        # SilhouetteConfig); absent: off
+      "flip_classifier": {"file": "flip.onnx", "size": 128, "axis": "z",
+                          "decide_prob": 0.97, "veto_prob": 0.1},   # optional, needs silhouette: a
+                                       # graph that tells the outline's winner from its flip in the
+                                       # left image (spacepose.flip_classifier.FlipClassifierConfig)
       "rig": {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0},
       "distance_range_m": [10.0, 50.0],
       "dataset": {"seed": 0, "size": 10000},
@@ -73,6 +77,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .errors import BundleError
+from .flip_classifier import FlipClassifierConfig, parse_flip_classifier
 from .pose_inputs import PoseInputSpec
 from .registration import RegistrationConfig
 from .silhouette import SilhouetteConfig
@@ -203,6 +208,8 @@ class ModelBundle:
             ``silhouette_points`` (Q, 3) the outline samples (empty when the manifest has none).
         registration: multi-start registration settings, ``None`` when the bundle does not use it.
         silhouette: outline-stage settings, ``None`` when the bundle does not use it.
+        flip_classifier: the optional flip graph's section (:mod:`spacepose.flip_classifier`), ``None``
+            when the bundle has none.
         stereo, pose, voting: graph and voting configs; ``rig``: the training rig.
         distance_range_m: (near, far) target distance the graphs were trained for.
         dataset_seed, dataset_size, training_commit, metrics: provenance and measured numbers.
@@ -231,6 +238,7 @@ class ModelBundle:
     registration: RegistrationConfig | None = None
     silhouette_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     silhouette: SilhouetteConfig | None = None
+    flip_classifier: FlipClassifierConfig | None = None
     graph_metadata: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     @property
@@ -595,7 +603,15 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         registration=_parse_registration(data.get("registration"), len(surface)),
         silhouette_points=_frozen(outline),
         silhouette=_parse_silhouette(data.get("silhouette"), len(outline), data.get("registration") is not None),
+        flip_classifier=_parse_flip(data),
     )
+
+
+def _parse_flip(data: Mapping[str, Any]) -> FlipClassifierConfig | None:
+    config = parse_flip_classifier(data.get("flip_classifier"))
+    if config is not None and data.get("silhouette") is None:
+        raise BundleError("bundle.json: flip_classifier needs a silhouette section (it judges the outline's winner)")
+    return config
 
 
 # ----------------------------------------------------------------------------------- graphs
@@ -665,7 +681,10 @@ def load_bundle(path: str | os.PathLike | None = None, verify_graphs: bool = Tru
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise BundleError(f"model bundle {folder}: bundle.json is unreadable or not JSON: {err}") from err
     bundle = _parse_manifest(data, folder)
-    for kind, file in (("stereo", bundle.stereo_path), ("pose", bundle.pose_path)):
+    files = [("stereo", bundle.stereo_path), ("pose", bundle.pose_path)]
+    if bundle.flip_classifier is not None:
+        files.append(("flip", folder / bundle.flip_classifier.file))
+    for kind, file in files:
         if not file.is_file():
             raise BundleError(f"model bundle {folder} is missing {file.name}")
     if verify_graphs:

@@ -33,6 +33,8 @@ COMMANDS: dict[str, str] = {
     "train-pose": "spacepose.tools.cli_train_pose",
     "eval-pose": "spacepose.tools.cli_eval_pose",
     "export-pose": "spacepose.export.cli_export_pose",
+    "train-flip": "spacepose.tools.train_flip",
+    "export-flip": "spacepose.export.onnx_flip",
     "quantize": "spacepose.export.cli_quantize",
     "recover-checkpoint": "spacepose.export.cli_recover",
     "reexport": "spacepose.export.cli_reexport",

@@ -46,6 +46,7 @@ from . import roi
 from .bundle import ModelBundle, load_bundle
 from .errors import ShapeError
 from .flip import flipped_pose, resolve_flip
+from .flip_classifier import FlipClassifier
 from .outline_search import OutlineTemplates
 from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
@@ -107,6 +108,9 @@ class PoseResult:
         polish_deg, polish_m: how far the silhouette stage's polish (``polish`` of the bundle's
             ``silhouette`` section, :func:`spacepose.silhouette.polish_pose`) moved the decided pose; NaN
             when it did not run or was not used. Not part of the JSON line.
+        flip_prob: with the bundle's ``flip_classifier``, the probability the classifier gives the outline
+            stage's winner against its 180° flip (:mod:`spacepose.flip_classifier`); NaN when it did not
+            run. Not part of the JSON line.
         decided: ``(R, t)`` before the polish, when it moved the pose (the next frame's tracking
             compares with it: the tracking gates were set on unpolished poses); ``None`` otherwise.
     """
@@ -132,6 +136,7 @@ class PoseResult:
     outline_image_pixels: float = float("nan")
     polish_deg: float = float("nan")
     polish_m: float = float("nan")
+    flip_prob: float = float("nan")
     decided: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
@@ -330,6 +335,9 @@ class PoseEstimator:
                               if self.bundle.registration is not None else None)
         self._outline_points = (np.ascontiguousarray(self.bundle.silhouette_points, dtype=np.float32)
                                 if self.bundle.silhouette is not None and self._registration is not None else None)
+        fc = self.bundle.flip_classifier
+        self._flip_classifier = (FlipClassifier(self.bundle.path, fc, self.bundle.target_name, threads=self.threads)
+                                 if fc is not None and self._outline_points is not None else None)
         sil = self.bundle.silhouette
         self._outline_templates = (
             OutlineTemplates(self._outline_points, np.asarray(self.bundle.centre), float(self.bundle.radius),
@@ -422,7 +430,7 @@ class PoseEstimator:
                             outline_image_background=factor("outline_image_background"),
                             outline_image_pixels=factor("outline_image_pixels"),
                             polish_deg=factor("polish_deg"), polish_m=factor("polish_m"),
-                            decided=stage.decided if valid else None)
+                            flip_prob=factor("flip_prob"), decided=stage.decided if valid else None)
         if status == "bad_input":  # a bad frame says nothing about where the target is: the prior stays as it was
             return result
         with self._lock:
@@ -543,6 +551,14 @@ class PoseEstimator:
                                outline_image_background=outline.vote.background_lit,
                                outline_image_pixels=float(outline.vote.pixels))
         sil = bundle.silhouette
+        flip_p = self._flip_probability(outline, stereo, left_r, timer)
+        if flip_p is not None:
+            factors["flip_prob"] = flip_p
+            fc = bundle.flip_classifier
+            if flip_p <= fc.veto_prob and (outline.decided(sil) or conclusive):
+                return _stage_invalid(stage, "weak_votes", factors), (
+                    f"the flip classifier gives the decided pose {flip_p:.2f} against its flip")
+        learned = self._learned_choice(outline, flip_p)
         if outline is not None and outline.decided(sil):
             if conclusive and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:
                 return _stage_invalid(stage, "weak_votes", factors), (
@@ -563,6 +579,10 @@ class PoseEstimator:
             if outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px:
                 R, t = outline.best.R, outline.best.t
             confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
+        elif learned is not None:
+            R, t = learned
+            confidence = reg.inlier_fraction * abs(2.0 * flip_p - 1.0)
+            factors["flip_decided"] = 1.0
         else:
             tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
             refined = []
@@ -651,6 +671,53 @@ class PoseEstimator:
                               (w.x0, w.y0, w.side), bundle.silhouette, stereo_points=xyz,
                               surface=self._registration, tau_m=reg.tau_m, flip=flip, image=left_r,
                               templates=self._outline_templates)
+
+    def _flip_probability(self, outline: Any, stereo: Any, left_r: np.ndarray | None, timer: StageTimer
+                          ) -> float | None:
+        """The flip classifier's probability for the outline's winner against its exact flip (``None``
+        without a classifier, an outline decision or an image); times ``flip_net`` (the graph's run is
+        network time, the view's making is not)."""
+        if self._flip_classifier is None or outline is None or left_r is None or outline.frame is None:
+            return None
+        best = outline.best
+        if not (np.all(np.isfinite(best.R)) and np.all(np.isfinite(best.t))):
+            return None
+        axis = self._flip_classifier.config.axis
+        w = outline.frame
+        with timer.stage("flip_net"):
+            views = self._flip_classifier.views(left_r, self.K, (w.x0, w.y0, w.side), self._outline_points,
+                                                (best.R, best.t), flipped_pose(best.R, best.t, self.bundle.centre, axis))
+            t_net = time.perf_counter()
+            p = self._flip_classifier.probability(views)
+            timer.add_network((time.perf_counter() - t_net) * 1e3)
+        return p
+
+    def _learned_choice(self, outline: Any, flip_p: float | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """The pose the flip classifier decides on a frame (``None`` when it does not): the outline's
+        winner when it gives it at least ``decide_prob``, the outline's rival when it gives the winner
+        at most ``1 - decide_prob`` and that rival is the winner's flip (within 20°, refined); either
+        only when the pose fits the outline within ``max_chamfer_px``, the outline margin is at least
+        ``min_margin_px``, the outlines differ in enough pixels and a usable image vote does not
+        back the other one."""
+        if flip_p is None:
+            return None
+        fc, sil = self.bundle.flip_classifier, self.bundle.silhouette
+        if outline.too_few_flip_pixels(sil) or outline.margin_px < fc.min_margin_px:
+            return None
+        vote = outline.vote if sil.image_vote and outline.vote is not None and outline.vote.usable else None
+        best, other = outline.best, outline.other
+        if flip_p >= fc.decide_prob and best.chamfer_px <= fc.max_chamfer_px:
+            if vote is not None and vote.score <= sil.image_veto_score:
+                return None
+            return best.R, best.t
+        if flip_p <= 1.0 - fc.decide_prob and other.chamfer_px <= fc.max_chamfer_px and np.all(np.isfinite(other.R)):
+            flip_R, _ = flipped_pose(best.R, best.t, self.bundle.centre, fc.axis)
+            if float(rotation_angle_deg(flip_R, other.R)) > 20.0:
+                return None
+            if vote is not None and vote.score >= -sil.image_veto_score:
+                return None
+            return other.R, other.t
+        return None
 
     def _valid_prior(self, max_gap: int | None = None) -> tuple[np.ndarray, np.ndarray] | None:
         """The last valid pose, at most ``max_gap`` (default ``prior_max_gap``) frames back, when

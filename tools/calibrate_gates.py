@@ -26,6 +26,20 @@ pose is kept when a usable vote does not score ``image_veto_score`` or less, the
 ``min_flip_pixels`` differing pixels, and either its chamfer and margin pass, or the image route does
 (its own chamfer gate, the larger of the two). Run the evaluation with ``image_min_pixels`` 0 and ``image_veto_score`` -1, so that every vote is
 in the rows (a report made with a higher veto score tables only veto scores at or above it).
+
+``--flip``: the same evaluation with a ``flip_classifier`` in the bundle that neither decides nor vetoes
+(``decide_prob`` and ``veto_prob`` at their defaults), so that every row carries ``flip_prob``, the
+classifier's probability for the outline's winner against its flip. The outline and image gates are
+fixed at ``--chamfer`` / ``--margin`` and the shipped image route (``--image-margin``, ``--score``,
+``--min-pixels``, ``--veto``, ``--image-chamfer``, ``--flip-min-pixels``, ``--background``); the grid is over
+the classifier's ``decide_prob``, ``veto_prob`` and ``max_chamfer_px``
+(:class:`spacepose.flip_classifier.FlipClassifierConfig`). A frame the outline gates decide is kept unless
+the classifier gives its winner ``veto_prob`` or less; one they leave open is kept for the winner when the
+classifier gives it at least ``decide_prob`` (the winner within the classifier's chamfer gate, no usable
+image vote against it), or for the winner's flip when it gives the winner at most ``1 - decide_prob``
+(the flip's fit is taken as the winner's chamfer plus the margin; no usable image vote for the winner).
+A row's outcome for the flip is read from the winner's: a flip when the winner was right, its error up to
+the flip (``e_R_sym``) when the winner was a flip.
 """
 
 from __future__ import annotations
@@ -41,8 +55,8 @@ import numpy as np
 
 from spacepose.tools.eval_pose import FLIP_DEG
 
-__all__ = ["gate_table", "outline_gate_table", "image_gate_table", "propose", "propose_outline", "propose_image",
-           "main"]
+__all__ = ["gate_table", "outline_gate_table", "image_gate_table", "flip_gate_table", "propose", "propose_outline",
+           "propose_image", "propose_flip", "main"]
 
 
 def _finite(value: Any) -> float:
@@ -142,6 +156,62 @@ def image_gate_table(rows: Iterable[dict[str, Any]], max_chamfer_px: float, min_
     return table
 
 
+def flip_gate_table(rows: Iterable[dict[str, Any]], decides: Sequence[float], vetoes: Sequence[float],
+                    chamfers: Sequence[float], *, max_chamfer_px: float, min_margin_px: float, image_margin: float,
+                    image_score: float, image_pixels: int, image_veto: float, image_chamfer: float, flip_pixels: int,
+                    max_background: float, max_e_t: float, max_e_r: float) -> list[dict[str, float]]:
+    """One row per (decide_prob, veto_prob, max_chamfer_px) of the flip classifier (module docstring): kept
+    poses, how many the classifier decides and vetoes, flips and wrong poses among the kept, mean errors of
+    the kept poses that are not flips."""
+    ok = [r for r in rows if r.get("valid") and math.isfinite(_finite(r.get("flip_prob")))]
+    prob = np.array([_finite(r.get("flip_prob")) for r in ok])
+    chamfer = np.nan_to_num(np.array([_finite(r.get("outline_chamfer_px")) for r in ok]), nan=np.inf)
+    margin = np.nan_to_num(np.array([_finite(r.get("outline_margin_px")) for r in ok]), nan=-np.inf)
+    score = np.array([_finite(r.get("outline_image_score")) for r in ok])
+    background = np.nan_to_num(np.array([_finite(r.get("outline_image_background")) for r in ok]), nan=np.inf)
+    n_pixels = np.nan_to_num(np.array([_finite(r.get("outline_image_pixels")) for r in ok]), nan=0.0)
+    e_t, e_r, flip, wrong = _outcomes(ok, max_e_t, max_e_r)
+    e_sym = np.array([_finite(r.get("e_R_sym")) for r in ok])
+    # the winner's flip: a flip when the winner was right, right (up to e_R_sym) when the winner was a flip
+    flip_of_other = ~flip
+    wrong_other = ~flip | (e_t > max_e_t) | (np.nan_to_num(e_sym, nan=np.inf) > max_e_r)
+    usable = np.isfinite(score) & (background <= max_background) & (n_pixels >= max(image_pixels, 1))
+    s = np.nan_to_num(score, nan=0.0)
+    apart = ~np.isfinite(score) | (n_pixels >= flip_pixels)
+    veto_image = usable & (s <= image_veto)
+    by_margin = (chamfer <= max_chamfer_px) & (margin >= min_margin_px) & ~veto_image & apart
+    by_image = ((chamfer <= max(max_chamfer_px, image_chamfer)) & usable & ~veto_image & apart
+                & (margin >= image_margin) & (s >= image_score))
+    decided = by_margin | by_image
+    table = []
+    for d, v, c in itertools.product(decides, vetoes, chamfers):
+        vetoed = decided & (prob <= v)
+        for_best = ~decided & apart & (chamfer <= c) & (prob >= d) & ~veto_image
+        for_other = ~decided & apart & (chamfer + margin <= c) & (prob <= 1.0 - d) & ~(usable & (s >= -image_veto))
+        kept_best = (decided & ~vetoed) | for_best
+        kept = kept_best | for_other
+        flips = (kept_best & flip) | (for_other & flip_of_other)
+        bad = (kept_best & wrong) | (for_other & wrong_other)
+        good = kept & ~flips
+        err_t = np.where(good, e_t, np.nan)
+        err_r = np.where(kept_best & good, e_r, np.where(for_other & good, e_sym, np.nan))
+        table.append({"decide_prob": float(d), "veto_prob": float(v), "max_chamfer_px": float(c),
+                      "kept": int(kept.sum()), "decided": int((for_best | for_other).sum()),
+                      "for_flip": int(for_other.sum()), "vetoed": int(vetoed.sum()), "flips": int(flips.sum()),
+                      "wrong": int(bad.sum()),
+                      "e_t_mean": float(np.nanmean(err_t)) if good.any() else float("nan"),
+                      "e_R_mean": float(np.nanmean(err_r)) if good.any() else float("nan")})
+    return table
+
+
+def propose_flip(table: list[dict[str, float]]) -> dict[str, float] | None:
+    """The classifier gates keeping the most poses with no flip (stricter on ties); None if none keeps any."""
+    safe = [r for r in table if r["flips"] == 0 and r["kept"] > 0]
+    if not safe:
+        return None
+    return max(safe, key=lambda r: (r["kept"], -r["wrong"], r["decide_prob"], r["veto_prob"], -r["max_chamfer_px"]))
+
+
 def propose_image(table: list[dict[str, float]]) -> dict[str, float] | None:
     """The image-route gates keeping the most poses with no flip (stricter on ties); None if none keeps any."""
     safe = [r for r in table if r["flips"] == 0 and r["kept"] > 0]
@@ -188,12 +258,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--image-chamfers", type=float, nargs="*", default=None,
                    help="--image: image_max_chamfer_px grid (0: the margin route's --chamfer)")
     p.add_argument("--flip-pixels", type=int, nargs="*", default=None, help="--image: min_flip_pixels grid")
+    p.add_argument("--flip", action="store_true", help="the flip classifier's gates (module docstring)")
+    p.add_argument("--decides", type=float, nargs="*", default=None, help="--flip: decide_prob grid")
+    p.add_argument("--flip-vetoes", type=float, nargs="*", default=None, help="--flip: veto_prob grid")
+    p.add_argument("--flip-chamfers", type=float, nargs="*", default=None, help="--flip: max_chamfer_px grid")
+    p.add_argument("--image-margin", type=float, default=0.2, help="--flip: the bundle's image_min_margin_px")
+    p.add_argument("--score", type=float, default=0.1, help="--flip: the bundle's image_min_score")
+    p.add_argument("--min-pixels", type=int, default=16, help="--flip: the bundle's image_min_pixels")
+    p.add_argument("--veto", type=float, default=0.0, help="--flip: the bundle's image_veto_score")
+    p.add_argument("--image-chamfer", type=float, default=2.0, help="--flip: the bundle's image_max_chamfer_px")
+    p.add_argument("--flip-min-pixels", type=int, default=16, help="--flip: the bundle's min_flip_pixels")
     args = p.parse_args(argv)
     reports = [json.loads(path.read_text()) for path in args.report]
     if any(r.get("split") == "test" for r in reports):
         raise SystemExit("calibrate on train frames, not the test split")
     report = {"split": "+".join(sorted({str(r.get("split")) for r in reports}))}
     rows = [row for r in reports for row in r["frames"]]
+    if args.flip:
+        return _main_flip(args, report, rows)
     if args.image:
         return _main_image(args, report, rows)
     if args.outline:
@@ -268,6 +350,29 @@ def _main_image(args: argparse.Namespace, report: dict[str, Any], rows: list[dic
           f"({best['kept']} poses kept, {best['by_image']} by the image)")
     _write_out(args, {"image": True, "max_chamfer_px": args.chamfer, "min_margin_px": args.margin,
                       "image_max_background": args.background}, table, best)
+    return 0
+
+
+def _main_flip(args: argparse.Namespace, report: dict[str, Any], rows: list[dict[str, Any]]) -> int:
+    fixed = {"max_chamfer_px": args.chamfer, "min_margin_px": args.margin, "image_margin": args.image_margin,
+             "image_score": args.score, "image_pixels": args.min_pixels, "image_veto": args.veto,
+             "image_chamfer": args.image_chamfer, "flip_pixels": args.flip_min_pixels,
+             "max_background": args.background}
+    table = flip_gate_table(rows, args.decides or [0.9, 0.95, 0.97, 0.99, 0.995],
+                            args.flip_vetoes or [-1.0, 0.01, 0.05, 0.1, 0.2], args.flip_chamfers or [1.5, 2.0, 2.5, 3.0],
+                            max_e_t=args.max_e_t, max_e_r=args.max_e_r, **fixed)
+    best = propose_flip(table)
+    scored = sum(1 for r in rows if r.get("valid") and math.isfinite(_finite(r.get("flip_prob"))))
+    print(f"{scored} of {len(rows)} {report.get('split')} frames with a pose and a classifier score (gates open)")
+    print("| decide_prob | veto_prob | max_chamfer_px | kept | decided by it | for the flip | vetoed | flips | wrong "
+          "| e_t mean m | e_R mean ° |\n|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in table:
+        print(f"| {r['decide_prob']:.3f} | {r['veto_prob']:.2f} | {r['max_chamfer_px']:.1f} | {r['kept']} | {r['decided']} "
+              f"| {r['for_flip']} | {r['vetoed']} | {r['flips']} | {r['wrong']} | {r['e_t_mean']:.3f} | {r['e_R_mean']:.2f} |")
+    print("proposed:", "none (no setting keeps a pose without a flip)" if best is None else
+          f"decide_prob {best['decide_prob']}, veto_prob {best['veto_prob']}, max_chamfer_px {best['max_chamfer_px']} "
+          f"({best['kept']} poses kept, {best['decided']} decided by the classifier)")
+    _write_out(args, {"flip": True, **fixed}, table, best)
     return 0
 
 

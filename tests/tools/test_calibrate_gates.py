@@ -133,3 +133,45 @@ def test_image_table_and_proposal(tmp_path, capsys):
     assert (by_floor[16]["kept"], by_floor[16]["flips"]) == (2, 0)   # the row without a vote is not refused
     assert (by_veto[-0.1]["flips"], by_veto[-0.1]["vetoed"]) == (1, 1)
     assert (by_veto[0.0]["flips"], by_veto[0.0]["vetoed"], by_veto[0.0]["kept"]) == (0, 2, 2)
+
+
+def _flip_row(chamfer, margin, e_r, prob, e_sym=None, score=None, pixels=100):
+    row = _row(chamfer, margin, score, e_r, background=None if score is None else 0.0, pixels=pixels)
+    return {**row, "flip_prob": prob, "e_R_sym": e_r if e_sym is None else e_sym}
+
+
+FLIP_ROWS = [
+    _flip_row(0.7, 0.8, 2.0, 0.98),                  # the outline decides it, the classifier agrees
+    _flip_row(0.7, 0.8, 178.0, 0.03, e_sym=2.0),     # the outline decides a flip, the classifier disagrees
+    _flip_row(1.0, 0.1, 3.0, 0.995),                 # open; the classifier backs the winner
+    _flip_row(1.0, 0.2, 176.0, 0.004, e_sym=4.0),    # open; the winner is a flip and the classifier says so
+    _flip_row(1.0, 0.2, 3.0, 0.02),                  # open; the classifier is wrong (not sure enough at 0.99)
+    _flip_row(2.2, 0.1, 2.0, 0.999),                 # a looser fit: only the wider chamfer gate keeps it
+    _flip_row(1.0, 0.3, 3.0, 0.999, score=-0.2),     # open; the image refutes the winner, so nothing decides
+    _flip_row(1.0, 0.3, 3.0, None),                  # no classifier score: not in the table
+]
+
+
+def test_flip_table_and_proposal(tmp_path, capsys):
+    from spacepose.tools.calibrate_gates import flip_gate_table, propose_flip
+
+    fixed = {"max_chamfer_px": 1.5, "min_margin_px": 0.5, "image_margin": 0.2, "image_score": 0.1, "image_pixels": 16,
+             "image_veto": 0.0, "image_chamfer": 2.0, "flip_pixels": 16, "max_background": 0.02}
+    table = flip_gate_table(FLIP_ROWS, [0.95, 0.99], [-1.0, 0.05], [1.5, 2.5], max_e_t=0.5, max_e_r=20.0, **fixed)
+    by = {(r["decide_prob"], r["veto_prob"], r["max_chamfer_px"]): r for r in table}
+    loose = by[(0.95, -1.0, 1.5)]
+    assert (loose["kept"], loose["decided"], loose["for_flip"], loose["vetoed"], loose["flips"]) == (5, 3, 2, 0, 2)
+    strict = by[(0.99, 0.05, 1.5)]
+    assert (strict["kept"], strict["decided"], strict["vetoed"], strict["flips"]) == (3, 2, 1, 0)
+    best = propose_flip(table)
+    assert (best["decide_prob"], best["veto_prob"], best["max_chamfer_px"]) == (0.99, 0.05, 2.5)
+    assert (best["kept"], best["flips"], best["wrong"]) == (4, 0, 0)
+    assert best["e_R_mean"] == pytest.approx((2.0 + 3.0 + 4.0 + 2.0) / 4)   # the flip's error is e_R_sym
+    assert propose_flip([{**r, "flips": 1} for r in table]) is None
+    report = tmp_path / "r.json"
+    report.write_text(json.dumps({"split": "train", "frames": FLIP_ROWS}))
+    assert main([str(report), "--flip", "--decides", "0.95", "0.99", "--flip-vetoes", "-1", "0.05",
+                 "--flip-chamfers", "1.5", "2.5", "--out", str(tmp_path / "g.json")]) == 0
+    written = json.loads((tmp_path / "g.json").read_text())
+    assert written["proposed"]["decide_prob"] == 0.99 and written["proposed"]["veto_prob"] == 0.05
+    assert "7 of 8 train frames with a pose and a classifier score" in capsys.readouterr().out

@@ -1,0 +1,127 @@
+"""The flip classifier at run time: which of the outline stage's winner and its 180° flip the left image shows.
+
+An optional graph of the bundle (``flip_classifier`` section, :class:`FlipClassifierConfig`), trained by
+``spacepose train-flip`` (:mod:`spacepose.models.flip_net`). It sees one view
+(:func:`spacepose.flip_views.flip_views`): the left image over the stereo window and the outlines of the
+two poses, and returns the probability that the first is the right one. The estimator
+(:meth:`spacepose.estimator.PoseEstimator._register`) uses it two ways:
+
+* to **veto**: a pose the outline or the stereo points decided, which the classifier gives at most
+  ``veto_prob``, is reported ``weak_votes``;
+* to **decide**: a frame the outline leaves undecided, whose winner fits the outline within
+  ``max_chamfer_px``, is decided for the pose the classifier gives at least ``decide_prob``.
+
+Both thresholds are chosen on training frames (``bundle.json``), never by the exporter.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from .errors import BundleError
+from .flip_views import CHANNELS, flip_views
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["FlipClassifierConfig", "FlipClassifier", "parse_flip_classifier"]
+
+
+@dataclass(frozen=True)
+class FlipClassifierConfig:
+    """The ``flip_classifier`` section of ``bundle.json``.
+
+    file: the graph, in the bundle folder. size: side of a view (pixels). axis: body axis of the flip.
+    decide_prob: least probability with which the classifier decides a frame the outline leaves open
+        (> 1 never decides). veto_prob: a decided pose it gives at most this is refused (< 0 never
+        vetoes). max_chamfer_px: the outline fit (outline px) a pose it decides must reach.
+    min_margin_px: the least outline margin of a frame it decides (0: any).
+    """
+
+    file: str = "flip.onnx"
+    size: int = 128
+    axis: str = "z"
+    decide_prob: float = 2.0
+    veto_prob: float = -1.0
+    max_chamfer_px: float = 2.0
+    min_margin_px: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.size < 16:
+            raise ValueError(f"flip_classifier.size must be >= 16, got {self.size}")
+        if self.axis not in ("x", "y", "z"):
+            raise ValueError(f"flip_classifier.axis must be x, y or z, got {self.axis!r}")
+        if self.decide_prob <= 0.5 or self.veto_prob >= 0.5:
+            raise ValueError(f"flip_classifier: decide_prob must be > 0.5 and veto_prob < 0.5, "
+                             f"got {self.decide_prob}, {self.veto_prob}")
+        if self.max_chamfer_px < 0 or self.min_margin_px < 0:
+            raise ValueError("flip_classifier: max_chamfer_px and min_margin_px must be >= 0")
+
+
+def parse_flip_classifier(section: Any) -> FlipClassifierConfig | None:
+    """The bundle's ``flip_classifier`` section (``None`` when absent); BundleError when malformed."""
+    if section is None:
+        return None
+    if not isinstance(section, Mapping):
+        raise BundleError(f"bundle.json: flip_classifier must be an object, got {type(section).__name__}")
+    fields = FlipClassifierConfig.__dataclass_fields__
+    unknown = sorted(set(section) - set(fields))
+    if unknown:
+        raise BundleError(f"bundle.json: flip_classifier has unknown keys {unknown}")
+    values = {}
+    for key, value in section.items():
+        kind = type(getattr(FlipClassifierConfig(), key))
+        if kind is str:
+            if not isinstance(value, str):
+                raise BundleError(f"bundle.json: flip_classifier.{key} must be a string")
+        elif isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            raise BundleError(f"bundle.json: flip_classifier.{key} must be a finite number, got {value!r}")
+        elif kind is int and int(value) != value:
+            raise BundleError(f"bundle.json: flip_classifier.{key} must be an integer, got {value!r}")
+        values[key] = kind(value)
+    try:
+        return FlipClassifierConfig(**values)
+    except ValueError as err:
+        raise BundleError(f"bundle.json: {err}") from err
+
+
+class FlipClassifier:
+    """The graph of a bundle's ``flip_classifier`` section, and its decision thresholds.
+
+    Args:
+        folder: the bundle folder. config: its ``flip_classifier`` section. target: the bundle's target
+        name (the graph's metadata must name it). threads: onnxruntime intra-op threads.
+
+    Raises:
+        BundleError: the graph is missing, unloadable, or its metadata disagrees with the section.
+    """
+
+    def __init__(self, folder: str | os.PathLike, config: FlipClassifierConfig, target: str, threads: int = 1) -> None:
+        from .onnx_session import make_session, session_metadata
+
+        self.config = config
+        path = Path(folder) / config.file
+        self.session = make_session(path, threads=threads, mem_arena=True)
+        meta = session_metadata(self.session)
+        expect = {"kind": "flip", "size": config.size, "axis": config.axis, "channels": CHANNELS, "target": target}
+        for key, value in expect.items():
+            if key not in meta or meta[key] != value:
+                raise BundleError(f"flip graph {path.name}: metadata {key}={meta.get(key)!r}, bundle expects {value!r}")
+        self.metadata = meta
+
+    def views(self, image: np.ndarray, K_full: np.ndarray, window: tuple[int, int, int],
+              silhouette_points: np.ndarray, pose_a: tuple[np.ndarray, np.ndarray],
+              pose_b: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """(1, 3, S, S) input of ``pose_a`` against ``pose_b`` seen in ``image`` (H, W[, C], rectified left)
+        over the full-frame ``window`` ``(x0, y0, side)`` (:func:`spacepose.flip_views.flip_views`)."""
+        return flip_views(image, K_full, window, silhouette_points, pose_a, pose_b, self.config.size)[None]
+
+    def probability(self, views: np.ndarray) -> float:
+        """Probability that the first pose of :meth:`views` is the right one (runs the graph)."""
+        logit = float(self.session.run(["logit"], {"views": views})[0].reshape(-1)[0])
+        return float(1.0 / (1.0 + np.exp(-np.clip(logit, -60.0, 60.0))))

@@ -1,0 +1,238 @@
+"""Tests of spacepose.flip_views, spacepose.flip_classifier and the estimator's flip-classifier routes."""
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # --import-mode=importlib: find the helpers
+
+from spacepose.bundle import load_bundle  # noqa: E402
+from spacepose.errors import BundleError  # noqa: E402
+from spacepose.flip import flipped_pose  # noqa: E402
+from spacepose.flip_classifier import FlipClassifier, FlipClassifierConfig, parse_flip_classifier  # noqa: E402
+from spacepose.flip_views import flip_views, view_frame  # noqa: E402
+from spacepose.image_vote import ImageVote  # noqa: E402
+from spacepose.silhouette import OutlineDecision, OutlineFit, silhouette_frame, splat_mask  # noqa: E402
+
+K = np.array([[800.0, 0.0, 319.5], [0.0, 800.0, 239.5], [0.0, 0.0, 1.0]])
+SIZE = 32
+
+
+def _points(seed=0):
+    """A plate with a tab on +x: its flip about z puts the tab on -x."""
+    rng = np.random.default_rng(seed)
+    body = np.stack([rng.uniform(-1.0, 1.0, 4000), rng.uniform(-0.5, 0.5, 4000), np.zeros(4000)], 1)
+    tab = np.stack([rng.uniform(1.0, 1.6, 800), rng.uniform(-0.15, 0.15, 800), np.zeros(800)], 1)
+    return np.vstack([body, tab]).astype(np.float32)
+
+
+def test_views_are_the_outlines_and_the_image_relative_to_the_target():
+    pts = _points()
+    R, t = np.eye(3), np.array([0.0, 0.0, 20.0])
+    Rf, tf = flipped_pose(R, t, np.zeros(3), "z")
+    window = (230, 150, 180)
+    frame = view_frame(K, *window, 64)
+    truth = splat_mask(pts, R, t, frame)[0]
+    image = np.zeros((480, 640), np.float32)
+    full = splat_mask(pts, R, t, view_frame(K, 0, 0, 640, 640))[0][:480]
+    image[full > 0] = 0.4
+    v = flip_views(image, K, window, pts, (R, t), (Rf, tf), 64)
+    assert v.shape == (3, 64, 64) and v.dtype == np.float32
+    np.testing.assert_array_equal(v[1], truth)
+    assert (v[1] != v[2]).sum() > 20                       # the tab moved
+    assert v[0].max() == pytest.approx(1.0, abs=0.05)      # relative to the target's 90th percentile
+    # brightness-free: the same scene at 3x the exposure gives the same view
+    np.testing.assert_allclose(flip_views(image * 3, K, window, pts, (R, t), (Rf, tf), 64), v, atol=1e-5)
+    # the order of the poses only swaps the outline planes
+    w = flip_views(image, K, window, pts, (Rf, tf), (R, t), 64)
+    np.testing.assert_array_equal(w[1], v[2])
+    np.testing.assert_array_equal(w[0], v[0])
+
+
+def test_view_frame_upscales_unlike_the_silhouette_frame():
+    assert view_frame(K, 10, 20, 50, 128).size == 128
+    assert silhouette_frame(K, 10, 20, 50, 128).size == 50
+    with pytest.raises(ValueError):
+        flip_views(np.zeros((48, 64)), K, (0, 0, 40), _points(), (np.eye(3), np.ones(3)), (np.eye(3), np.ones(3)), 4)
+
+
+@pytest.mark.parametrize("section, match", [
+    ([], "must be an object"), ({"bogus": 1}, "unknown keys"), ({"size": "a"}, "finite number"),
+    ({"size": 8}, "size"), ({"axis": "w"}, "axis"), ({"decide_prob": 0.4}, "decide_prob"),
+    ({"veto_prob": 0.6}, "veto_prob"), ({"max_chamfer_px": -1}, "max_chamfer_px"), ({"file": 3}, "string"),
+    ({"size": 64.5}, "integer"), ({"decide_prob": float("nan")}, "finite"),
+])
+def test_bad_sections_are_refused(section, match):
+    with pytest.raises(BundleError, match=match):
+        parse_flip_classifier(section)
+
+
+def test_defaults_never_decide_nor_veto():
+    c = parse_flip_classifier({})
+    assert c == FlipClassifierConfig() and c.decide_prob > 1.0 and c.veto_prob < 0.0
+    assert parse_flip_classifier(None) is None
+
+
+def make_flip_graph(path: Path, size: int = SIZE, metadata: dict | None = None, gain: float = 500.0) -> None:
+    """logit = gain * mean(g * (a - b)): the outline the lit pixels fill wins (antisymmetric, like FlipNet)."""
+    import onnx
+    from onnx import TensorProto, helper
+
+    from spacepose.onnx_session import write_metadata
+
+    nodes = [
+        helper.make_node("Split", ["views", "split"], ["g", "a", "b"], axis=1),
+        helper.make_node("Sub", ["a", "b"], ["d"]),
+        helper.make_node("Mul", ["g", "d"], ["gd"]),
+        helper.make_node("ReduceMean", ["gd"], ["m"], axes=[1, 2, 3], keepdims=0),
+        helper.make_node("Mul", ["m", "gain"], ["logit"]),
+    ]
+    graph = helper.make_graph(
+        nodes, "flip", [helper.make_tensor_value_info("views", TensorProto.FLOAT, ["B", 3, size, size])],
+        [helper.make_tensor_value_info("logit", TensorProto.FLOAT, ["B"])],
+        initializer=[helper.make_tensor("split", TensorProto.INT64, [3], [1, 1, 1]),
+                     helper.make_tensor("gain", TensorProto.FLOAT, [], [gain])])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    write_metadata(model, metadata if metadata is not None else
+                   {"kind": "flip", "size": size, "axis": "z", "channels": 3, "target": "tiny"})
+    onnx.checker.check_model(model)
+    onnx.save(model, str(path))
+
+
+def test_classifier_checks_its_metadata_and_scores_antisymmetrically(tmp_path):
+    make_flip_graph(tmp_path / "flip.onnx")
+    config = FlipClassifierConfig(size=SIZE)
+    clf = FlipClassifier(tmp_path, config, "tiny")
+    pts = _points()
+    R, t = np.eye(3), np.array([0.0, 0.0, 20.0])
+    Rf, tf = flipped_pose(R, t, np.zeros(3), "z")
+    image = np.zeros((480, 640), np.uint8)
+    full = splat_mask(pts, R, t, view_frame(K, 0, 0, 640, 640))[0][:480]
+    image[full > 0] = 200
+    window = (230, 150, 180)
+    p = clf.probability(clf.views(image, K, window, pts, (R, t), (Rf, tf)))
+    q = clf.probability(clf.views(image, K, window, pts, (Rf, tf), (R, t)))
+    assert p > 0.9 and p + q == pytest.approx(1.0, abs=1e-6)
+    for meta, name in (({"kind": "pose", "size": SIZE, "axis": "z", "channels": 3, "target": "tiny"}, "kind"),
+                       ({"kind": "flip", "size": 64, "axis": "z", "channels": 3, "target": "tiny"}, "size"),
+                       ({"kind": "flip", "size": SIZE, "axis": "z", "channels": 3, "target": "other"}, "target")):
+        make_flip_graph(tmp_path / "bad.onnx", metadata=meta)
+        with pytest.raises(BundleError, match=name):
+            FlipClassifier(tmp_path, dataclasses.replace(config, file="bad.onnx"), "tiny")
+    with pytest.raises(BundleError, match="not found"):
+        FlipClassifier(tmp_path, dataclasses.replace(config, file="missing.onnx"), "tiny")
+
+
+def test_bundle_section_needs_the_silhouette_stage_and_the_graph(tmp_path):
+    from _bundle_fixtures import make_bundle
+
+    folder = make_bundle(tmp_path / "plain", manifest_overrides={"flip_classifier": {"size": SIZE}})
+    with pytest.raises(BundleError, match="needs a silhouette"):
+        load_bundle(folder)
+    from test_silhouette import _estimator
+
+    est = _estimator(tmp_path, {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 5.0})
+    data = json.loads((est.bundle.path / "bundle.json").read_text())
+    data["flip_classifier"] = {"size": SIZE}
+    (est.bundle.path / "bundle.json").write_text(json.dumps(data))
+    with pytest.raises(BundleError, match="missing flip.onnx"):
+        load_bundle(est.bundle.path)
+    make_flip_graph(est.bundle.path / "flip.onnx")
+    assert load_bundle(est.bundle.path).flip_classifier == FlipClassifierConfig(size=SIZE)
+
+
+def _flip_estimator(tmp_path, monkeypatch, prob, **section):
+    """The outline-stage estimator of test_silhouette with a flip graph whose probability is ``prob``."""
+    from test_silhouette import _estimator
+
+    from spacepose.calibration.rig import paper_rig
+    from spacepose.estimator import PoseEstimator
+
+    est = _estimator(tmp_path, {"min_margin": 0.99}, {"max_chamfer_px": 1.0, "min_margin_px": 0.5, "image_vote": 1,
+                                                      "image_veto_score": 0.0})
+    data = json.loads((est.bundle.path / "bundle.json").read_text())
+    data["flip_classifier"] = {"size": SIZE, "decide_prob": 0.9, "veto_prob": 0.1, "max_chamfer_px": 1.5, **section}
+    (est.bundle.path / "bundle.json").write_text(json.dumps(data))
+    make_flip_graph(est.bundle.path / "flip.onnx")
+    monkeypatch.setattr(FlipClassifier, "probability", lambda self, views: prob)
+    return PoseEstimator(paper_rig(640, 480), bundle=load_bundle(est.bundle.path), threads=1)
+
+
+def _decision(est, seen, chamfer=1.2, margin=0.3, vote=None, other_turn=0.0):
+    """A fake outline decision: the candidate (kept in ``seen``) with the given chamfer and margin over its
+    flip (turned ``other_turn`` degrees more)."""
+    def decide(candidates, silhouette_points, disparity, K_full, baseline_m, window, *args, **kwargs):
+        R, t = candidates[0]
+        seen["R"] = R
+        R_f, t_f = flipped_pose(R, t, est.bundle.centre, "z")
+        if other_turn:
+            from spacepose.registration import exp_so3
+            R_f = exp_so3(np.array([0.0, np.radians(other_turn), 0.0])) @ R_f
+        frame = silhouette_frame(K_full, *window, 192)
+        return OutlineDecision(best=OutlineFit(R, t, chamfer), other=OutlineFit(R_f, t_f, chamfer + margin),
+                               best_index=0, margin_px=margin, turned_deg=180.0, vote=vote, frame=frame)
+    return decide
+
+
+@pytest.mark.parametrize("prob, chamfer, margin, vote, other_turn, valid, flipped", [
+    (0.95, 1.2, 0.3, None, 0.0, True, False),      # the outline leaves it open, the classifier decides the winner
+    (0.05, 1.2, 0.3, None, 0.0, True, True),       # ... or the winner's flip (the outline's rival)
+    (0.05, 1.2, 0.3, None, 40.0, False, False),    # a rival that is not the flip is not taken
+    (0.8, 1.2, 0.3, None, 0.0, False, False),      # not sure enough
+    (0.95, 1.8, 0.3, None, 0.0, False, False),     # the winner fits the outline too loosely
+    (0.95, 1.2, 0.3, ImageVote(-0.3, 500, 0.0, 0.1, True), 0.0, False, False),   # the image vote says no
+    (0.05, 0.5, 0.8, None, 0.0, False, False),     # the outline decided the winner: the classifier vetoes it
+    (0.5, 0.5, 0.8, None, 0.0, True, False),       # ... but an unsure classifier does not
+])
+def test_the_classifier_decides_open_frames_and_vetoes_decided_ones(tmp_path, monkeypatch, prob, chamfer, margin, vote,
+                                                                    other_turn, valid, flipped):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.registration import rotation_angle_deg
+
+    left, right = synthetic_pair()
+    est = _flip_estimator(tmp_path, monkeypatch, prob)
+    seen = {}
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, seen, chamfer, margin, vote, other_turn))
+    monkeypatch.setattr(estimator_module, "polish_pose", lambda *a, **k: None)
+    res = est.estimate(left, right)
+    assert res.flip_prob == prob
+    assert res.valid == valid, res.detail
+    if valid:
+        assert (rotation_angle_deg(res.R, seen["R"]) > 90.0) == flipped
+    else:
+        assert res.status == "weak_votes"
+    if prob <= 0.1 and margin >= 0.5:
+        assert "flip classifier" in res.detail
+
+
+def test_without_a_classifier_nothing_changes(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from test_silhouette import _estimator
+
+    left, right = synthetic_pair()
+    est = _estimator(tmp_path, {"min_margin": 0.99}, {"max_chamfer_px": 1.0, "min_margin_px": 0.5})
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 1.2, 0.3))
+    res = est.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes" and np.isnan(res.flip_prob)
+
+
+def test_quantized_copies_keep_the_flip_graph_float32(tmp_path):
+    from test_silhouette import _estimator
+
+    from spacepose.export.quantize import quantize_bundle
+
+    est = _estimator(tmp_path, {"min_margin": 0.99}, {"max_chamfer_px": 1.0, "min_margin_px": 0.5})
+    data = json.loads((est.bundle.path / "bundle.json").read_text())
+    data["flip_classifier"] = {"size": SIZE, "decide_prob": 0.9}
+    (est.bundle.path / "bundle.json").write_text(json.dumps(data))
+    make_flip_graph(est.bundle.path / "flip.onnx")
+    out = quantize_bundle(est.bundle.path, tmp_path / "fp16", "fp16")
+    assert (out / "flip.onnx").read_bytes() == (est.bundle.path / "flip.onnx").read_bytes()
+    assert load_bundle(out).flip_classifier.decide_prob == 0.9

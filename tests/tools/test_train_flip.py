@@ -1,0 +1,129 @@
+"""Tests of spacepose.tools.flip_data, spacepose.tools.train_flip and spacepose.export.onnx_flip."""
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "runtime"))  # the runtime tests' bundle helpers
+
+from spacepose.cli import main  # noqa: E402
+from spacepose.flip import flipped_pose  # noqa: E402
+from spacepose.flip_views import view_frame  # noqa: E402
+from spacepose.silhouette import splat_mask  # noqa: E402
+from spacepose.tools.flip_data import (FlipSampleConfig, augment_views, load_samples, make_flip_samples,  # noqa: E402
+                                       perturb_pose, save_samples, stereo_window)
+from spacepose.registration import rotation_angle_deg  # noqa: E402
+
+
+def _plate_points(seed=0):
+    """The synthetic dataset's target stand-in: a plate with a tab on +x (its z flip puts the tab on -x)."""
+    rng = np.random.default_rng(seed)
+    body = np.stack([rng.uniform(-1.0, 1.0, 3000), rng.uniform(-0.6, 0.6, 3000), np.zeros(3000)], 1)
+    tab = np.stack([rng.uniform(1.0, 1.5, 600), rng.uniform(-0.15, 0.15, 600), np.zeros(600)], 1)
+    return np.vstack([body, tab])
+
+
+def test_exact_samples_put_the_true_outline_where_the_label_says(synthetic_dataset):
+    from spacepose.calibration.rig import load_rig
+    from spacepose.tools.labels import read_labels
+
+    pts = _plate_points().astype(np.float32)
+    exact = FlipSampleConfig(size=32, rot_sigma_deg=0.0, wide_prob=0.0, lateral_sigma_m=0.0, range_sigma_m=0.0,
+                             side_range=(1.0, 1.0), centre_jitter=0.0)
+    s = make_flip_samples(synthetic_dataset, pts, np.zeros(3), split="train", per_frame=3, seed=0, config=exact)
+    frames = read_labels(synthetic_dataset, "train", require=("R", "t"))
+    K = load_rig(synthetic_dataset / "rig.yaml").M1
+    assert s["views"].shape == (3 * len(frames), 3, 32, 32) and set(s["labels"]) <= {0.0, 1.0}
+    assert 0 < s["labels"].sum() < len(s["labels"])
+    for k in range(len(s["labels"])):
+        rec = frames[s["frame"][k]]
+        truth = (np.asarray(rec.R), np.asarray(rec.t))
+        flip = flipped_pose(*truth, np.zeros(3), "z")
+        slot_truth, slot_flip = (1, 2) if s["labels"][k] == 1.0 else (2, 1)
+        # the window is the winner's (the truth or its flip, unperturbed here): one of the two holds
+        matches = []
+        for winner in (truth, flip):
+            frame = view_frame(K, *stereo_window(pts, *winner, K, 1.0, None, exact), 32)
+            matches.append(np.array_equal(s["views"][k, slot_truth], splat_mask(pts, *truth, frame)[0])
+                           and np.array_equal(s["views"][k, slot_flip], splat_mask(pts, *flip, frame)[0]))
+        assert any(matches), k
+        assert (s["views"][k, 1] != s["views"][k, 2]).any()
+    info = {"x": 1}
+    save_samples(s, synthetic_dataset.parent / "flip.npz", info)
+    back = load_samples(synthetic_dataset.parent / "flip.npz")
+    np.testing.assert_array_equal(back["views"][:, 1:], s["views"][:, 1:])
+    np.testing.assert_allclose(back["views"][:, 0], s["views"][:, 0], atol=2e-3)
+
+
+def test_perturbation_and_augmentation_stay_in_their_bounds():
+    rng = np.random.default_rng(0)
+    R, t = np.eye(3), np.array([1.0, 0.0, 30.0])
+    cfg = FlipSampleConfig()
+    angles = [rotation_angle_deg(perturb_pose(R, t, rng, cfg)[0], R) for _ in range(300)]
+    assert max(angles) < cfg.rot_wide_deg + 4 * cfg.rot_sigma_deg and np.median(angles) < 2 * cfg.rot_sigma_deg
+    views = np.zeros((4, 3, 32, 32), np.float32)
+    views[:, 0] = 1.0
+    views[:, 1, 8:24, 8:24] = 1.0
+    out = augment_views(views, rng)
+    np.testing.assert_array_equal(out[:, 1:], views[:, 1:])
+    assert out[:, 0].min() >= 0.0 and out[:, 0].max() <= 2.0 and not np.array_equal(out[:, 0], views[:, 0])
+
+
+@pytest.fixture(scope="module")
+def plate_bundle(tmp_path_factory):
+    from _bundle_fixtures import make_bundle, manifest
+
+    pts = _plate_points()
+    target = dict(manifest()["target"], silhouette_points=pts.tolist())
+    return make_bundle(tmp_path_factory.mktemp("plate") / "b", manifest_overrides={"target": target})
+
+
+def test_train_resume_and_export(synthetic_dataset, plate_bundle, tmp_path):
+    from spacepose.onnx_session import make_session
+
+    out = tmp_path / "run"
+    args = ["train-flip", str(synthetic_dataset), "--val", str(synthetic_dataset), "--out", str(out), "--bundle",
+            str(plate_bundle), "--size", "32", "--batch", "4", "--per-frame", "2", "--val-frames", "4",
+            "--ckpt-every", "3", "--val-every", "3"]
+    assert main(args + ["--steps", "3"]) == 0
+    assert main(args + ["--steps", "3"]) == 2                     # refuses to overwrite without --resume
+    assert main(args + ["--steps", "6", "--resume"]) == 0
+    ckpt = torch.load(out / "last.pt", weights_only=False)
+    assert ckpt["step"] == 6 and ckpt["kind"] == "flip"
+    log = [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
+    assert [e["step"] for e in log if "val" in e] == [3, 6] and 0.0 <= log[-1]["val"]["all"]["accuracy"] <= 1.0
+
+    bundle = tmp_path / "bundle"
+    bundle.mkdir()
+    (bundle / "bundle.json").write_text(json.dumps({"flip_classifier": {"decide_prob": 0.97, "size": 99}}))
+    assert main(["export-flip", str(out / "last.pt"), "--out", str(bundle / "flip.onnx")]) == 0
+    section = json.loads((bundle / "bundle.json").read_text())["flip_classifier"]
+    assert section == {"decide_prob": 0.97, "size": 32, "file": "flip.onnx", "axis": "z"}
+    assert main(["export-flip", str(out / "last.pt"), "--out", str(bundle / "flip.onnx")]) == 2   # no --force
+    from spacepose.models.flip_net import FlipNet, FlipNetConfig
+    from spacepose.onnx_session import session_metadata
+
+    cfg = FlipNetConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ckpt["net_config"].items()})
+    net = FlipNet(cfg).eval()
+    net.load_state_dict(ckpt["model"])
+    session = make_session(bundle / "flip.onnx", threads=1)
+    meta = session_metadata(session)
+    assert meta["kind"] == "flip" and meta["size"] == 32 and meta["axis"] == "z" and meta["steps"] == 6
+    v = np.random.default_rng(3).uniform(0, 1, size=(3, 3, 32, 32)).astype(np.float32)
+    got = session.run(["logit"], {"views": v})[0]
+    with torch.no_grad():
+        np.testing.assert_allclose(got, net(torch.from_numpy(v)).numpy(), atol=1e-4)
+    swapped = np.ascontiguousarray(v[:, [0, 2, 1]])
+    np.testing.assert_allclose(session.run(["logit"], {"views": swapped})[0], -got, atol=1e-5)
+
+
+def test_export_refuses_a_checkpoint_of_another_kind(tmp_path):
+    torch.save({"kind": "pose"}, tmp_path / "x.pt")
+    assert main(["export-flip", str(tmp_path / "x.pt"), "--out", str(tmp_path / "flip.onnx")]) == 2
+    assert not (tmp_path / "flip.onnx").exists()

@@ -1,0 +1,175 @@
+"""Train the flip classifier (:class:`spacepose.models.flip_net.FlipNet`) on views of a rendered dataset.
+
+``spacepose train-flip DATASET --out runs/flip --val VAL_DATASET`` builds the sample caches
+(:mod:`spacepose.tools.flip_data`; ``OUT/train_samples.npz`` from DATASET's train split,
+``OUT/val_samples.npz`` from VAL_DATASET) once, then trains with AdamW and a cosine learning rate,
+binary cross-entropy on the logit of "slot A is the right pose", photometric augmentation on every
+batch. Checkpoints ``OUT/last.pt`` every ``--ckpt-every`` steps (``--resume`` continues one), a JSON
+line per logged step in ``OUT/log.jsonl``, and validation every ``--val-every`` steps: accuracy, and the
+share of samples with ``p >= 0.9`` (either way) and the error among them, overall and per regime.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import logging
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HELP = "train the flip classifier (which of a pose and its 180° flip the left image shows); resumable"
+
+log = logging.getLogger(__name__)
+
+KIND = "flip"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dataset", type=Path, help="rendered dataset (its train split is used)")
+    parser.add_argument("--val", type=Path, required=True, help="a dataset rendered with another seed (validation)")
+    parser.add_argument("--out", type=Path, default=Path("runs/flip"))
+    parser.add_argument("--bundle", type=Path, default=None, help="bundle whose silhouette samples draw the outlines")
+    parser.add_argument("--steps", type=int, default=3000)
+    parser.add_argument("--batch", type=int, default=64)
+    parser.add_argument("--lr", type=float, default=2e-3)
+    parser.add_argument("--weight-decay", type=float, default=1e-4)
+    parser.add_argument("--per-frame", type=int, default=4, help="training samples per frame")
+    parser.add_argument("--val-frames", type=int, default=300)
+    parser.add_argument("--size", type=int, default=128)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--ckpt-every", type=int, default=200)
+    parser.add_argument("--val-every", type=int, default=500)
+    parser.add_argument("--time-limit-s", type=float, default=0.0, help="stop (after a checkpoint) past this wall time")
+    parser.add_argument("--resume", action="store_true")
+
+
+def _samples(path: Path, dataset: Path, bundle: Any, *, split: str | None, per_frame: int, seed: int, size: int,
+             limit: int | None) -> dict[str, np.ndarray]:
+    from spacepose.tools.flip_data import FlipSampleConfig, load_samples, make_flip_samples, save_samples
+
+    if path.is_file():
+        return load_samples(path)
+    t0 = time.perf_counter()
+    samples = make_flip_samples(dataset, bundle.silhouette_points, bundle.centre, split=split, per_frame=per_frame,
+                                seed=seed, config=FlipSampleConfig(size=size), limit=limit)
+    save_samples(samples, path, {"dataset": str(dataset), "split": split, "per_frame": per_frame, "seed": seed})
+    log.info("%s: %d samples in %.0f s", path.name, len(samples["labels"]), time.perf_counter() - t0)
+    return load_samples(path)
+
+
+def evaluate(model: Any, views: np.ndarray, labels: np.ndarray, regimes: np.ndarray, batch: int = 128
+             ) -> dict[str, Any]:
+    """Accuracy, and coverage / error at ``p >= 0.9`` either way, overall and per regime."""
+    import torch
+
+    model.eval()
+    logits = []
+    with torch.no_grad():
+        for i in range(0, len(views), batch):
+            logits.append(model(torch.from_numpy(views[i:i + batch])).numpy())
+    model.train()
+    logit = np.concatenate(logits)
+    p = 1.0 / (1.0 + np.exp(-logit))
+
+    def stats(sel: np.ndarray) -> dict[str, float]:
+        right = (p[sel] > 0.5) == (labels[sel] > 0.5)
+        sure = np.maximum(p[sel], 1.0 - p[sel]) >= 0.9
+        return {"n": int(sel.sum()), "accuracy": float(right.mean()) if sel.any() else float("nan"),
+                "sure": float(sure.mean()) if sel.any() else float("nan"),
+                "sure_error": float((~right[sure]).mean()) if sure.any() else float("nan")}
+
+    out = {"all": stats(np.ones(len(p), bool))}
+    for r in sorted(set(regimes.tolist())):
+        out[r] = stats(regimes == r)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    from spacepose.bundle import load_bundle
+    from spacepose.errors import SpaceposeError
+    from spacepose.models.flip_net import FlipNet, FlipNetConfig
+    from spacepose.tools.flip_data import augment_views
+    from spacepose.tools.training_common import JsonlLog, atomic_save, load_checkpoint, seed_all
+
+    if args.steps < 1 or args.batch < 2:
+        raise SpaceposeError("--steps must be >= 1 and --batch >= 2")
+    torch.set_num_threads(max(1, args.threads))
+    out: Path = args.out
+    ckpt_path = out / "last.pt"
+    if ckpt_path.exists() and not args.resume:
+        raise SpaceposeError(f"{ckpt_path} exists: pass --resume to continue it, or choose another --out")
+    if args.resume and not ckpt_path.exists():
+        raise SpaceposeError(f"--resume given but {ckpt_path} does not exist")
+    out.mkdir(parents=True, exist_ok=True)
+    bundle = load_bundle(args.bundle, verify_graphs=False)
+    if len(bundle.silhouette_points) < 100:
+        raise SpaceposeError("the bundle has no silhouette samples to draw outlines with")
+    train = _samples(out / "train_samples.npz", args.dataset, bundle, split="train", per_frame=args.per_frame,
+                     seed=args.seed, size=args.size, limit=None)
+    val = _samples(out / "val_samples.npz", args.val, bundle, split=None, per_frame=1, seed=args.seed + 1,
+                   size=args.size, limit=args.val_frames)
+    config = FlipNetConfig(size=args.size)
+    seed_all(args.seed)
+    model = FlipNet(config)
+    optim = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=args.weight_decay)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        optim, lambda s: min(1.0, (s + 1) / 100) * 0.5 * (1.0 + math.cos(math.pi * min(s, args.steps) / args.steps)))
+    step = 0
+    if args.resume:
+        ckpt = load_checkpoint(ckpt_path, kind=KIND)
+        model.load_state_dict(ckpt["model"])
+        optim.load_state_dict(ckpt["optimizer"])
+        sched.load_state_dict(ckpt["scheduler"])
+        step = int(ckpt["step"])
+    log_file = JsonlLog(out / "log.jsonl", True)
+    loss_fn = torch.nn.BCEWithLogitsLoss()
+    n = len(train["labels"])
+    t_start, running = time.perf_counter(), []
+
+    def save() -> None:
+        atomic_save({"kind": KIND, "model": model.state_dict(), "optimizer": optim.state_dict(),
+                     "scheduler": sched.state_dict(), "step": step, "net_config": dataclasses.asdict(config),
+                     "train_config": {k: str(v) for k, v in vars(args).items() if not k.startswith("_")},
+                     "samples": n}, ckpt_path)
+
+    model.train()
+    while step < args.steps:
+        rng = np.random.default_rng([args.seed, step])
+        idx = rng.integers(0, n, size=args.batch)
+        views = augment_views(train["views"][idx], rng)
+        labels = train["labels"][idx].copy()
+        swap = rng.random(args.batch) < 0.5              # slot order is free: swap A and B, flip the label
+        views[swap, 1], views[swap, 2] = views[swap, 2].copy(), views[swap, 1].copy()
+        labels[swap] = 1.0 - labels[swap]
+        logit = model(torch.from_numpy(views))
+        loss = loss_fn(logit, torch.from_numpy(labels))
+        optim.zero_grad(set_to_none=True)
+        loss.backward()
+        optim.step()
+        sched.step()
+        step += 1
+        running.append(float(loss.detach()))
+        if step % 50 == 0:
+            log_file.write({"step": step, "loss": float(np.mean(running)), "lr": sched.get_last_lr()[0],
+                            "elapsed_s": time.perf_counter() - t_start})
+            log.info("step %d loss %.4f", step, np.mean(running))
+            running = []
+        if step % args.val_every == 0 or step == args.steps:
+            metrics = evaluate(model, val["views"], val["labels"], val["regime"])
+            log_file.write({"step": step, "val": metrics})
+            log.info("step %d val %s", step, metrics["all"])
+        timed_out = args.time_limit_s > 0 and time.perf_counter() - t_start > args.time_limit_s
+        if step % args.ckpt_every == 0 or step == args.steps or timed_out:
+            save()
+        if timed_out:
+            log.warning("time limit reached at step %d", step)
+            break
+    log_file.close()
+    return 0
