@@ -5,7 +5,10 @@ time asks (:mod:`spacepose.flip_classifier`): the outline stage's winner and tha
 The winner is the true pose, perturbed as the refinements leave it (:class:`FlipSampleConfig`), or
 the true pose's flip, perturbed the same way; the other pose is the winner's exact 180° flip about
 body ``axis``. Which of the two lands in slot A is drawn at random; the label is 1 when slot A holds
-the pose near the truth. The window is the stereo stage's (1.25 times the longest side of the target's
+the pose near the truth. With probability ``neither_prob`` the winner is a wrong pose instead
+(:func:`wrong_pose`: the outline stage's other mistakes, a half turn about another body axis or
+about the line of sight, or a turn of 25–155°), so that neither slot holds the truth, and the label
+is 0.5: the classifier must stay unsure when both poses are wrong. The window is the stereo stage's (1.25 times the longest side of the target's
 box joined with its right-image copy), with its side and centre jittered.
 
 The views are cached once (``flip_samples.npz``: grey as float16, outlines as uint8); photometric
@@ -30,7 +33,7 @@ from spacepose.tools.labels import read_labels
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FlipSampleConfig", "perturb_pose", "stereo_window", "make_flip_samples", "save_samples", "load_samples",
+__all__ = ["FlipSampleConfig", "perturb_pose", "wrong_pose", "stereo_window", "make_flip_samples", "save_samples", "load_samples",
            "augment_views"]
 
 
@@ -42,6 +45,7 @@ class FlipSampleConfig:
         ``wide_prob`` it is drawn from U(0, ``rot_wide_deg``) instead. lateral_sigma_m, range_sigma_m:
         translation error across and along the line of sight. side_range: the window side's factor
         over the stereo stage's; centre_jitter: window centre shift (units of its side).
+    neither_prob: share of samples whose winner is a wrong pose (:func:`wrong_pose`, label 0.5).
     """
 
     size: int = 128
@@ -54,6 +58,7 @@ class FlipSampleConfig:
     range_sigma_m: float = 0.3
     side_range: tuple[float, float] = (0.9, 1.35)
     centre_jitter: float = 0.06
+    neither_prob: float = 0.0
 
 
 def perturb_pose(R: np.ndarray, t: np.ndarray, rng: np.random.Generator, config: FlipSampleConfig
@@ -71,6 +76,40 @@ def perturb_pose(R: np.ndarray, t: np.ndarray, rng: np.random.Generator, config:
     shift -= los * float(shift @ los)
     shift += los * rng.normal(0.0, config.range_sigma_m)
     return R2, t + shift
+
+
+def wrong_pose(R: np.ndarray, t: np.ndarray, centre: np.ndarray, axis: str, rng: np.random.Generator
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) turned about the object-frame ``centre`` (3,) so that neither it nor its flip about body
+    ``axis`` is within 30° of it: a half turn about one of the other two body axes or about the line of
+    sight (each within 15° of it), or a turn of 25–155° about a random axis, as the outline stage gets
+    a pose wrong (a mirror-like outline fits these well)."""
+    c = np.asarray(centre, dtype=np.float64)
+    R = np.asarray(R, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    flip = flipped_pose(R, t, c, axis)[0]
+    while True:
+        kind = rng.random()
+        if kind < 0.4:
+            other = [a for a in "xyz" if a != axis][int(rng.integers(2))]
+            body = np.eye(3)["xyz".index(other)]
+            turn = R @ exp_so3(body * math.pi) @ R.T
+        elif kind < 0.7:
+            los = (R @ c + t) / max(float(np.linalg.norm(R @ c + t)), 1e-9)
+            turn = exp_so3(los * math.pi)
+        else:
+            a = rng.normal(size=3)
+            turn = exp_so3(a / np.linalg.norm(a) * math.radians(rng.uniform(25.0, 155.0)))
+        if kind < 0.7:
+            a = rng.normal(size=3)
+            turn = exp_so3(a / np.linalg.norm(a) * math.radians(rng.uniform(0.0, 15.0))) @ turn
+        R2 = turn @ R
+        if min(_angle_deg(R2, R), _angle_deg(R2, flip)) >= 30.0:
+            return R2, t + R @ c - R2 @ c
+
+
+def _angle_deg(A: np.ndarray, B: np.ndarray) -> float:
+    return math.degrees(math.acos(float(np.clip((np.trace(A.T @ B) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def stereo_window(points: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, baseline_m: float,
@@ -97,7 +136,8 @@ def make_flip_samples(root: str | Path, silhouette_points: np.ndarray, centre: n
                       limit: int | None = None) -> dict[str, np.ndarray]:
     """Views of ``per_frame`` samples for each frame of ``root`` (of ``split``; the first ``limit``).
 
-    Returns ``views`` (N, 3, S, S) float32, ``labels`` (N,) float32 (1: slot A near the truth),
+    Returns ``views`` (N, 3, S, S) float32, ``labels`` (N,) float32 (1: slot A near the truth, 0.5:
+    neither, ``config.neither_prob``),
     ``frame`` (N,) int index into the frames read, ``regime`` (N,) str, ``distance`` (N,) float.
     """
     from spacepose.calibration.rig import load_rig
@@ -115,13 +155,16 @@ def make_flip_samples(root: str | Path, silhouette_points: np.ndarray, centre: n
         for _ in range(per_frame):
             truth_first = bool(rng.random() < 0.5)
             base = (R_true, t_true) if truth_first else flipped_pose(R_true, t_true, centre, config.axis)
+            neither = config.neither_prob > 0 and bool(rng.random() < config.neither_prob)
+            if neither:
+                base = wrong_pose(R_true, t_true, centre, config.axis, rng)
             winner = perturb_pose(*base, rng, config)
             rival = flipped_pose(*winner, centre, config.axis)
             window = stereo_window(pts32, *winner, K, baseline, rng, config)
             a_is_winner = bool(rng.random() < 0.5)
             pose_a, pose_b = (winner, rival) if a_is_winner else (rival, winner)
             views.append(flip_views(image, K, window, pts32, pose_a, pose_b, config.size))
-            labels.append(float(truth_first == a_is_winner))
+            labels.append(0.5 if neither else float(truth_first == a_is_winner))
             index.append(i)
             regimes.append(rec.regime)
             distances.append(float(np.linalg.norm(t_true)))

@@ -7,6 +7,11 @@ binary cross-entropy on the logit of "slot A is the right pose", photometric aug
 batch. Checkpoints ``OUT/last.pt`` every ``--ckpt-every`` steps (``--resume`` continues one), a JSON
 line per logged step in ``OUT/log.jsonl``, and validation every ``--val-every`` steps: accuracy, and the
 share of samples with ``p >= 0.9`` (either way) and the error among them, overall and per regime.
+
+``--neither-prob P`` adds samples whose two poses are both wrong (label 0.5,
+:func:`spacepose.tools.flip_data.wrong_pose`); validation then also reports the share of those the
+classifier is sure of (``p >= 0.99`` either way), which must stay small for ``decide_prob`` to mean
+anything. ``--init CKPT`` starts from another run's weights (a fine-tune; a fresh optimiser).
 """
 
 from __future__ import annotations
@@ -46,25 +51,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--val-every", type=int, default=500)
     parser.add_argument("--time-limit-s", type=float, default=0.0, help="stop (after a checkpoint) past this wall time")
     parser.add_argument("--resume", action="store_true")
+    parser.add_argument("--init", type=Path, default=None, help="start from this train-flip checkpoint's weights")
+    parser.add_argument("--neither-prob", type=float, default=0.0,
+                        help="share of samples with both poses wrong (label 0.5)")
 
 
 def _samples(path: Path, dataset: Path, bundle: Any, *, split: str | None, per_frame: int, seed: int, size: int,
-             limit: int | None) -> dict[str, np.ndarray]:
+             limit: int | None, neither_prob: float = 0.0) -> dict[str, np.ndarray]:
     from spacepose.tools.flip_data import FlipSampleConfig, load_samples, make_flip_samples, save_samples
 
     if path.is_file():
         return load_samples(path)
     t0 = time.perf_counter()
     samples = make_flip_samples(dataset, bundle.silhouette_points, bundle.centre, split=split, per_frame=per_frame,
-                                seed=seed, config=FlipSampleConfig(size=size), limit=limit)
-    save_samples(samples, path, {"dataset": str(dataset), "split": split, "per_frame": per_frame, "seed": seed})
+                                seed=seed, config=FlipSampleConfig(size=size, neither_prob=neither_prob), limit=limit)
+    save_samples(samples, path, {"dataset": str(dataset), "split": split, "per_frame": per_frame, "seed": seed,
+                                 "neither_prob": neither_prob})
     log.info("%s: %d samples in %.0f s", path.name, len(samples["labels"]), time.perf_counter() - t0)
     return load_samples(path)
 
 
 def evaluate(model: Any, views: np.ndarray, labels: np.ndarray, regimes: np.ndarray, batch: int = 128
              ) -> dict[str, Any]:
-    """Accuracy, and coverage / error at ``p >= 0.9`` either way, overall and per regime."""
+    """Accuracy, and coverage / error at ``p >= 0.9`` either way, overall and per regime, over the samples
+    with one right pose; over those with none (label 0.5), their number and the share with ``p >= 0.99``
+    either way (``neither_sure``)."""
     import torch
 
     model.eval()
@@ -76,12 +87,19 @@ def evaluate(model: Any, views: np.ndarray, labels: np.ndarray, regimes: np.ndar
     logit = np.concatenate(logits)
     p = 1.0 / (1.0 + np.exp(-logit))
 
+    neither = labels == 0.5
+
     def stats(sel: np.ndarray) -> dict[str, float]:
+        sel, none = sel & ~neither, sel & neither
         right = (p[sel] > 0.5) == (labels[sel] > 0.5)
         sure = np.maximum(p[sel], 1.0 - p[sel]) >= 0.9
-        return {"n": int(sel.sum()), "accuracy": float(right.mean()) if sel.any() else float("nan"),
-                "sure": float(sure.mean()) if sel.any() else float("nan"),
-                "sure_error": float((~right[sure]).mean()) if sure.any() else float("nan")}
+        out = {"n": int(sel.sum()), "accuracy": float(right.mean()) if sel.any() else float("nan"),
+               "sure": float(sure.mean()) if sel.any() else float("nan"),
+               "sure_error": float((~right[sure]).mean()) if sure.any() else float("nan")}
+        if none.any():
+            out.update(neither=int(none.sum()),
+                       neither_sure=float((np.maximum(p[none], 1.0 - p[none]) >= 0.99).mean()))
+        return out
 
     out = {"all": stats(np.ones(len(p), bool))}
     for r in sorted(set(regimes.tolist())):
@@ -111,10 +129,12 @@ def run(args: argparse.Namespace) -> int:
     bundle = load_bundle(args.bundle, verify_graphs=False)
     if len(bundle.silhouette_points) < 100:
         raise SpaceposeError("the bundle has no silhouette samples to draw outlines with")
+    if not 0.0 <= args.neither_prob < 1.0:
+        raise SpaceposeError(f"--neither-prob must be in [0, 1), got {args.neither_prob}")
     train = _samples(out / "train_samples.npz", args.dataset, bundle, split="train", per_frame=args.per_frame,
-                     seed=args.seed, size=args.size, limit=None)
+                     seed=args.seed, size=args.size, limit=None, neither_prob=args.neither_prob)
     val = _samples(out / "val_samples.npz", args.val, bundle, split=None, per_frame=1, seed=args.seed + 1,
-                   size=args.size, limit=args.val_frames)
+                   size=args.size, limit=args.val_frames, neither_prob=args.neither_prob)
     config = FlipNetConfig(size=args.size)
     seed_all(args.seed)
     model = FlipNet(config)
@@ -122,6 +142,9 @@ def run(args: argparse.Namespace) -> int:
     sched = torch.optim.lr_scheduler.LambdaLR(
         optim, lambda s: min(1.0, (s + 1) / 100) * 0.5 * (1.0 + math.cos(math.pi * min(s, args.steps) / args.steps)))
     step = 0
+    if args.init is not None and not args.resume:
+        model.load_state_dict(load_checkpoint(args.init, kind=KIND)["model"])
+        log.info("weights from %s", args.init)
     if args.resume:
         ckpt = load_checkpoint(ckpt_path, kind=KIND)
         model.load_state_dict(ckpt["model"])

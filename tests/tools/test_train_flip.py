@@ -17,7 +17,7 @@ from spacepose.flip import flipped_pose  # noqa: E402
 from spacepose.flip_views import view_frame  # noqa: E402
 from spacepose.silhouette import splat_mask  # noqa: E402
 from spacepose.tools.flip_data import (FlipSampleConfig, augment_views, load_samples, make_flip_samples,  # noqa: E402
-                                       perturb_pose, save_samples, stereo_window)
+                                       perturb_pose, save_samples, stereo_window, wrong_pose)
 from spacepose.registration import rotation_angle_deg  # noqa: E402
 
 
@@ -75,6 +75,51 @@ def test_perturbation_and_augmentation_stay_in_their_bounds():
     assert out[:, 0].min() >= 0.0 and out[:, 0].max() <= 2.0 and not np.array_equal(out[:, 0], views[:, 0])
 
 
+def test_wrong_poses_are_far_from_the_truth_and_its_flip_and_keep_the_centre_in_place():
+    from spacepose.registration import exp_so3
+
+    rng = np.random.default_rng(1)
+    centre = np.array([0.1, -0.2, 0.35])
+    for _ in range(200):
+        R, t = exp_so3(rng.normal(size=3)), np.array([0.0, 0.0, 25.0]) + rng.normal(size=3)
+        R2, t2 = wrong_pose(R, t, centre, "z", rng)
+        np.testing.assert_allclose(R2 @ R2.T, np.eye(3), atol=1e-9)
+        assert rotation_angle_deg(R2, R) >= 30.0 - 1e-6
+        assert rotation_angle_deg(R2, flipped_pose(R, t, centre, "z")[0]) >= 30.0 - 1e-6
+        np.testing.assert_allclose(R2 @ centre + t2, R @ centre + t, atol=1e-9)
+
+
+def test_neither_samples_are_labelled_one_half(synthetic_dataset):
+    pts = _plate_points().astype(np.float32)
+    cfg = FlipSampleConfig(size=32, neither_prob=0.5)
+    s = make_flip_samples(synthetic_dataset, pts, np.zeros(3), split="train", per_frame=8, seed=0, config=cfg)
+    half = s["labels"] == 0.5
+    assert 0 < half.sum() < len(half) and set(np.unique(s["labels"][~half])) <= {0.0, 1.0}
+    plain = make_flip_samples(synthetic_dataset, pts, np.zeros(3), split="train", per_frame=8, seed=0,
+                              config=FlipSampleConfig(size=32))
+    assert not (plain["labels"] == 0.5).any()
+
+
+def test_evaluate_reports_how_sure_it_is_when_neither_pose_is_right():
+    from spacepose.tools.train_flip import evaluate
+
+    class Fixed(torch.nn.Module):
+        def __init__(self, logits):
+            super().__init__()
+            self.logits = torch.tensor(logits, dtype=torch.float32)
+
+        def forward(self, views):
+            return self.logits[views[:, 0, 0, 0].long()]
+
+    logits = [5.0, -5.0, 6.0, 0.1, -9.0]     # samples 0-1 have a right pose, 2-4 none
+    views = np.zeros((5, 3, 4, 4), np.float32)
+    views[:, 0, 0, 0] = np.arange(5)
+    labels = np.array([1.0, 1.0, 0.5, 0.5, 0.5], np.float32)
+    out = evaluate(Fixed(logits), views, labels, np.array(["a"] * 5))
+    assert out["all"]["n"] == 2 and out["all"]["accuracy"] == 0.5
+    assert out["all"]["neither"] == 3 and out["all"]["neither_sure"] == pytest.approx(2 / 3)
+
+
 @pytest.fixture(scope="module")
 def plate_bundle(tmp_path_factory):
     from _bundle_fixtures import make_bundle, manifest
@@ -98,6 +143,16 @@ def test_train_resume_and_export(synthetic_dataset, plate_bundle, tmp_path):
     assert ckpt["step"] == 6 and ckpt["kind"] == "flip"
     log = [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
     assert [e["step"] for e in log if "val" in e] == [3, 6] and 0.0 <= log[-1]["val"]["all"]["accuracy"] <= 1.0
+
+    tuned = tmp_path / "tuned"     # a fine-tune from those weights, with neither samples
+    assert main(args[:5] + [str(tuned)] + args[6:] + ["--steps", "1", "--init", str(out / "last.pt"),
+                                                      "--neither-prob", "0.5", "--val-frames", "8", "--seed", "5"]) == 0
+    first = torch.load(tuned / "last.pt", weights_only=False)
+    assert first["step"] == 1 and first["train_config"]["neither_prob"] == "0.5"
+    weights = [k for k, v in ckpt["model"].items() if k.endswith("weight") and v.ndim >= 2]
+    moved = [float((first["model"][k] - ckpt["model"][k]).abs().max()) for k in weights]
+    assert weights and max(moved) < 0.05    # one step from the initial weights, not a fresh draw (another seed)
+    assert main(args[:5] + [str(tmp_path / "bad")] + args[6:] + ["--steps", "1", "--neither-prob", "1.5"]) == 2
 
     bundle = tmp_path / "bundle"
     bundle.mkdir()
