@@ -8,8 +8,9 @@ body ``axis``. Which of the two lands in slot A is drawn at random; the label is
 the pose near the truth. With probability ``neither_prob`` the winner is a wrong pose instead
 (:func:`wrong_pose`: the outline stage's other mistakes, a half turn about another body axis or
 about the line of sight, or a turn of 25–155°), so that neither slot holds the truth, and the label
-is 0.5: the classifier must stay unsure when both poses are wrong. The window is the stereo stage's (1.25 times the longest side of the target's
-box joined with its right-image copy), with its side and centre jittered.
+is 0.5: the classifier must stay unsure when both poses are wrong. The window is the stereo stage's
+(1.25 times the longest side of the target's box joined with its right-image copy), with its side
+and centre jittered.
 
 The views are cached once (``flip_samples.npz``: grey as float16, outlines as uint8); photometric
 augmentation happens in the training loop (:func:`augment_views`), on the cached views.
@@ -33,8 +34,8 @@ from spacepose.tools.labels import read_labels
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FlipSampleConfig", "perturb_pose", "wrong_pose", "stereo_window", "make_flip_samples", "save_samples", "load_samples",
-           "augment_views"]
+__all__ = ["FlipSampleConfig", "perturb_pose", "wrong_pose", "stereo_window", "make_flip_samples", "save_samples",
+           "load_samples", "augment_views"]
 
 
 @dataclass(frozen=True)
