@@ -29,7 +29,7 @@ import numpy as np
 from spacepose.flip import flipped_pose
 from spacepose.flip_views import flip_views
 from spacepose.imageio import read_image
-from spacepose.registration import exp_so3
+from spacepose.registration import exp_so3, rotation_angle_deg
 from spacepose.tools.labels import read_labels
 
 log = logging.getLogger(__name__)
@@ -89,6 +89,7 @@ def wrong_pose(R: np.ndarray, t: np.ndarray, centre: np.ndarray, axis: str, rng:
     R = np.asarray(R, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64)
     flip = flipped_pose(R, t, c, axis)[0]
+    centre_cam = R @ c + t
     while True:
         kind = rng.random()
         if kind < 0.4:
@@ -96,8 +97,7 @@ def wrong_pose(R: np.ndarray, t: np.ndarray, centre: np.ndarray, axis: str, rng:
             body = np.eye(3)["xyz".index(other)]
             turn = R @ exp_so3(body * math.pi) @ R.T
         elif kind < 0.7:
-            los = (R @ c + t) / max(float(np.linalg.norm(R @ c + t)), 1e-9)
-            turn = exp_so3(los * math.pi)
+            turn = exp_so3(centre_cam / max(float(np.linalg.norm(centre_cam)), 1e-9) * math.pi)  # line of sight
         else:
             a = rng.normal(size=3)
             turn = exp_so3(a / np.linalg.norm(a) * math.radians(rng.uniform(25.0, 155.0)))
@@ -105,12 +105,8 @@ def wrong_pose(R: np.ndarray, t: np.ndarray, centre: np.ndarray, axis: str, rng:
             a = rng.normal(size=3)
             turn = exp_so3(a / np.linalg.norm(a) * math.radians(rng.uniform(0.0, 15.0))) @ turn
         R2 = turn @ R
-        if min(_angle_deg(R2, R), _angle_deg(R2, flip)) >= 30.0:
-            return R2, t + R @ c - R2 @ c
-
-
-def _angle_deg(A: np.ndarray, B: np.ndarray) -> float:
-    return math.degrees(math.acos(float(np.clip((np.trace(A.T @ B) - 1.0) / 2.0, -1.0, 1.0))))
+        if min(rotation_angle_deg(R2, R), rotation_angle_deg(R2, flip)) >= 30.0:
+            return R2, centre_cam - R2 @ c
 
 
 def stereo_window(points: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, baseline_m: float,
