@@ -4,6 +4,7 @@ at import time: the heavy imports stay inside :func:`require_export_extras`)."""
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 from pathlib import Path
 from typing import Any
@@ -32,8 +33,9 @@ def require_export_extras() -> None:
 
 
 def load_metrics(path: Path | None) -> dict[str, Any] | None:
-    """The metrics to embed from an eval report (its ``ours.overall`` section, else the whole object)."""
+    """The metrics to embed from an eval report (its ``ours.overall`` section, else the whole object);
+    a ``.gz`` report (how older reports are stored) is read through gzip."""
     if path is None:
         return None
-    doc = json.loads(path.read_text())
+    doc = json.loads(gzip.decompress(path.read_bytes()) if path.suffix == ".gz" else path.read_text())
     return doc.get("ours", {}).get("overall", doc) if isinstance(doc, dict) else None

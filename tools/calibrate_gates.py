@@ -45,6 +45,7 @@ the flip (``e_R_sym``) when the winner was a flip.
 from __future__ import annotations
 
 import argparse
+import gzip
 import itertools
 import json
 import math
@@ -269,7 +270,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--image-chamfer", type=float, default=2.0, help="--flip: the bundle's image_max_chamfer_px")
     p.add_argument("--flip-min-pixels", type=int, default=16, help="--flip: the bundle's min_flip_pixels")
     args = p.parse_args(argv)
-    reports = [json.loads(path.read_text()) for path in args.report]
+    reports = [json.loads(gzip.decompress(path.read_bytes()) if path.suffix == ".gz" else path.read_text())
+               for path in args.report]
     if any(r.get("split") == "test" for r in reports):
         raise SystemExit("calibrate on train frames, not the test split")
     report = {"split": "+".join(sorted({str(r.get("split")) for r in reports}))}

@@ -68,8 +68,10 @@ def run(args: argparse.Namespace) -> int:
                           cycles=args.cycles, augment=not args.no_augment, ckpt_every=args.ckpt_every,
                           val_every=args.val_every, val_samples=args.val_samples, log_every=args.log_every,
                           workers=args.workers, threads=args.threads, seed=args.seed, limit=args.limit,
-                          init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s,
+                          init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s, pace_lr=args.pace_lr,
                           symmetric_flip=args.symmetric_flip)
+    if args.pace_lr and not args.time_limit_s:
+        raise SystemExit("--pace-lr needs --time-limit-s")
     if args.init and args.resume:
         raise SystemExit("--init starts a new run; --resume continues one: give one of them")
     summary = train_pose(cfg, resume=args.resume)

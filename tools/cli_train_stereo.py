@@ -62,12 +62,15 @@ def run(args: argparse.Namespace) -> int:
                       ckpt_every=args.ckpt_every, val_every=args.val_every, val_samples=args.val_samples,
                       log_every=args.log_every, workers=args.workers, threads=args.threads, seed=args.seed,
                       limit=args.limit, oversample=dict(args.oversample),
-                      init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s, target_weight=args.target_weight,
+                      init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s,
+                      pace_lr=args.pace_lr, target_weight=args.target_weight,
                       edge_weight=args.edge_weight, edge_radius=args.edge_radius)
     if not args.target_weight > 0:
         raise SystemExit("--target-weight must be > 0")
     if not args.edge_weight > 0 or args.edge_radius < 1:
         raise SystemExit("--edge-weight must be > 0 and --edge-radius >= 1")
+    if args.pace_lr and not args.time_limit_s:
+        raise SystemExit("--pace-lr needs --time-limit-s")
     if args.init and args.resume:
         raise SystemExit("--init starts a new run; --resume continues one: give one of them")
     summary = train_stereo(cfg, resume=args.resume)

@@ -30,3 +30,6 @@ def add_loop_arguments(parser: argparse.ArgumentParser, *, workers: int) -> None
     parser.add_argument("--resume", action="store_true", help="continue OUT/last.pt")
     parser.add_argument("--time-limit-s", type=float, default=None,
                         help="also stop (checkpoint saved, resumable) after this many seconds of training")
+    parser.add_argument("--pace-lr", action="store_true",
+                        help="with --time-limit-s: run the learning-rate schedule to its end by the time limit, "
+                             "jumping ahead of the step count when the steps are slower than steps/time")

@@ -46,28 +46,32 @@ def job_commands(args: argparse.Namespace, work: Path) -> dict[str, list[list[st
     data = work / "data"
     bundle = Path(args.bundle)
     common = ["--threads", str(args.threads), "--ckpt-every", "500", "--val-every", str(args.val_every),
-              "--time-limit-s", str(args.time_limit_s), "--seed", str(args.seed)]
+              "--time-limit-s", str(args.time_limit_s), "--pace-lr", "--seed", str(args.seed)]
+    stereo_workers = args.loader_workers if args.stereo_workers is None else args.stereo_workers
+    pose_workers = args.loader_workers if args.pose_workers is None else args.pose_workers
+    flip = ["--symmetric-flip", args.pose_symmetric_flip] if args.pose_symmetric_flip else []
     stereo = _spacepose("train-stereo", str(data), "--out", str(work / "stereo"), "--steps", str(args.stereo_steps),
                         "--batch", str(args.stereo_batch), "--train-crop", "160x160", "--init",
                         str(work / "init_stereo.pt"), "--lr", str(args.stereo_lr), "--workers",
-                        str(args.loader_workers), "--target-weight", str(args.target_weight), "--edge-weight",
+                        str(stereo_workers), "--target-weight", str(args.target_weight), "--edge-weight",
                         str(args.edge_weight), "--oversample", "mixed=3", "penumbra=2", *common)
     pose = _spacepose("train-pose", str(data), "--out", str(work / "pose"), "--steps", str(args.pose_steps),
                       "--batch", str(args.pose_batch), "--depth-source", "gt_noisy", "--init",
                       str(work / "init_pose.pt"), "--lr-min", "1e-5", "--lr-max", str(args.pose_lr_max),
-                      "--cycles", "3", "--workers", str(args.loader_workers), *common)
+                      "--cycles", str(args.pose_cycles), "--workers", str(pose_workers), *flip, *common)
+    recover = {kind: _spacepose("recover-checkpoint", str(bundle / f"{kind}.onnx"), "--out",
+                                str(work / f"init_{kind}.pt"), "--force") for kind in ("stereo", "pose")}
+    export = {"stereo": _spacepose("export-stereo", str(work / "stereo" / "last.pt"), "--out",
+                                   str(work / "export" / "stereo.onnx"), "--no-manifest", "--force"),
+              "pose": _spacepose("export-pose", str(work / "pose" / "last.pt"), "--out",
+                                 str(work / "export" / "pose.onnx"), "--force")}
+    train = {"stereo": stereo, "pose": pose}
     return {
         "render": [_spacepose("render", str(data), "--target", "tdrs", "--count", str(args.frames), "--size",
                               args.size, "--seed", str(args.data_seed), "--workers", str(args.render_workers))],
-        "recover": [_spacepose("recover-checkpoint", str(bundle / "stereo.onnx"), "--out",
-                               str(work / "init_stereo.pt"), "--force"),
-                    _spacepose("recover-checkpoint", str(bundle / "pose.onnx"), "--out",
-                               str(work / "init_pose.pt"), "--force")],
-        "train": [stereo, pose],
-        "export": [_spacepose("export-stereo", str(work / "stereo" / "last.pt"), "--out",
-                              str(work / "export" / "stereo.onnx"), "--no-manifest", "--force"),
-                   _spacepose("export-pose", str(work / "pose" / "last.pt"), "--out",
-                              str(work / "export" / "pose.onnx"), "--force")],
+        "recover": [recover[kind] for kind in args.kinds],
+        "train": [train[kind] for kind in args.kinds],
+        "export": [export[kind] for kind in args.kinds],
     }
 
 
@@ -92,6 +96,25 @@ def _weights_only(ckpt_path: Path, out: Path) -> None:
     torch.save(keep, out)
 
 
+def _with_time_limit(cmd: list[str], seconds: float) -> list[str]:
+    """``cmd`` with the value of its ``--time-limit-s`` replaced."""
+    i = cmd.index("--time-limit-s")
+    return [*cmd[:i + 1], f"{seconds:.0f}", *cmd[i + 2:]]
+
+
+def _collect(work: Path, out: Path, *, weights: bool) -> None:
+    """Copy the logs, and the model-only weights or the exported graphs, from ``work`` into ``out``."""
+    for kind in ("stereo", "pose"):
+        run = work / kind
+        if (run / "log.jsonl").is_file():
+            shutil.copyfile(run / "log.jsonl", out / f"{kind}_log.jsonl")
+        if weights and (run / "last.pt").is_file():
+            _weights_only(run / "last.pt", out / f"{kind}_weights.pt")
+        graph = work / "export" / f"{kind}.onnx"
+        if not weights and graph.is_file():
+            shutil.copyfile(graph, out / f"{kind}.onnx")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m spacepose.tools.device_job", description=__doc__.split("\n")[0])
     p.add_argument("--work", type=Path, required=True, help="scratch folder (data, runs); created")
@@ -102,6 +125,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data-seed", type=int, default=11, help="dataset seed (not the shipped data's 1: new frames)")
     p.add_argument("--render-workers", type=int, default=14)
     p.add_argument("--loader-workers", type=int, default=6, help="DataLoader workers per training process")
+    p.add_argument("--stereo-workers", type=int, default=None, help="DataLoader workers of the stereo run "
+                   "(default: --loader-workers)")
+    p.add_argument("--pose-workers", type=int, default=None, help="DataLoader workers of the pose run "
+                   "(default: --loader-workers)")
+    p.add_argument("--pose-symmetric-flip", choices=("x", "y", "z"), default=None,
+                   help="train-pose --symmetric-flip (the flip-aware keypoint loss)")
+    p.add_argument("--pose-cycles", type=int, default=3)
     p.add_argument("--threads", type=int, default=0, help="torch threads per training process (0: default)")
     p.add_argument("--stereo-steps", type=int, default=20000)
     p.add_argument("--pose-steps", type=int, default=20000)
@@ -111,7 +141,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pose-lr-max", type=float, default=1e-3)
     p.add_argument("--target-weight", type=float, default=4.0)
     p.add_argument("--edge-weight", type=float, default=3.0, help="train-stereo --edge-weight (session 6's recipe)")
-    p.add_argument("--time-limit-s", type=float, default=360.0, help="wall-clock limit of each training process")
+    p.add_argument("--time-limit-s", type=float, default=360.0, help="wall-clock limit of each training process; "
+                   "both learning-rate schedules are paced to end by it (train-* --pace-lr)")
+    p.add_argument("--kinds", nargs="+", choices=("stereo", "pose"), default=["stereo", "pose"],
+                   help="which networks to fine-tune (the others' loader workers and GPU time go to these)")
+    p.add_argument("--budget-s", type=float, default=None,
+                   help="wall-clock budget of the whole job: the training time limit becomes what is left of it "
+                        "after rendering and recovery, less --export-reserve-s (at most --time-limit-s)")
+    p.add_argument("--export-reserve-s", type=float, default=75.0)
     p.add_argument("--val-every", type=int, default=1000)
     p.add_argument("--seed", type=int, default=0)
     return p
@@ -127,28 +164,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     phases = job_commands(args, work)
     report: dict = {"args": {k: str(v) for k, v in vars(args).items()}, "phases": {}}
     ok = True
+    trained = tuple(args.kinds)
+    t_job = time.perf_counter()
     for name, commands in phases.items():
+        if name == "train" and args.budget_s is not None:
+            left = args.budget_s - (time.perf_counter() - t_job) - args.export_reserve_s
+            limit = max(30.0, min(args.time_limit_s, left))
+            commands = [_with_time_limit(cmd, limit) for cmd in commands]
+            report["train_time_limit_s"] = round(limit, 1)
+            log.info("training time limit %.0f s", limit)
+        if name == "export":   # export what trained, both at once
+            commands = [cmd for kind, cmd in zip(args.kinds, commands) if kind in trained]
         t0 = time.perf_counter()
         logs = [work / f"{name}_{i}.log" for i in range(len(commands))]
-        codes = _run_all(commands, logs) if name == "train" else [
+        codes = _run_all(commands, logs) if name in ("train", "export") else [
             _run_all([cmd], [path])[0] for cmd, path in zip(commands, logs)]
         seconds = time.perf_counter() - t0
         tails = [path.read_text(errors="replace")[-1500:] for path in logs]
         report["phases"][name] = {"seconds": round(seconds, 1), "exit_codes": codes,
                                   "commands": [" ".join(c) for c in commands], "log_tails": tails}
         log.info("%s: %.0f s, exit codes %s", name, seconds, codes)
-        if any(codes):
-            ok = False
+        ok = ok and not any(codes)
+        if name == "train":    # weights come back even if the export or the call's time limit fails later
+            trained = tuple(kind for kind, code in zip(args.kinds, codes) if code == 0)
+            _collect(work, out, weights=True)
+        (out / "job.json").write_text(json.dumps({**report, "ok": None}, indent=2))
+        if name in ("render", "recover") and any(codes) or not trained:
             break
-    for kind in ("stereo", "pose"):
-        run = work / kind
-        if (run / "log.jsonl").is_file():
-            shutil.copyfile(run / "log.jsonl", out / f"{kind}_log.jsonl")
-        if (run / "last.pt").is_file():
-            _weights_only(run / "last.pt", out / f"{kind}_weights.pt")
-        graph = work / "export" / f"{kind}.onnx"
-        if graph.is_file():
-            shutil.copyfile(graph, out / f"{kind}.onnx")
+    _collect(work, out, weights=False)
     report["ok"] = ok
     (out / "job.json").write_text(json.dumps(report, indent=2))
     return 0 if ok else 1

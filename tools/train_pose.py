@@ -70,6 +70,8 @@ class TrainPoseConfig:
     init: str | None = None
     #: stop after this many seconds of training in one call (None: run all ``steps``)
     time_limit_s: float | None = None
+    #: keep the schedule on pace with ``time_limit_s`` (:class:`~spacepose.tools.training_common.SchedulePacer`)
+    pace_lr: bool = False
     #: score keypoints against the nearer of the true pose and the pose flipped 180° about this body
     #: axis ("x", "y", "z"; None: the paper's loss). For a near-symmetric target, whose plain L1
     #: optimum without the flip cue is the flat midpoint (``python -m spacepose.tools.keypoint_floor``).
@@ -205,6 +207,7 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
     elif cfg.init:
         folded = init_from(model, cfg.init, net_cfg)
     tc.freeze_folded_batchnorm(model, folded)
+    pacer = tc.SchedulePacer(cfg.steps, cfg.time_limit_s) if (cfg.pace_lr and cfg.time_limit_s) else None
 
     net = tc.wrap_ddp(model, ctx)
     names = model.input_names
@@ -250,7 +253,7 @@ def train_pose(cfg: TrainPoseConfig, *, resume: bool = False) -> dict[str, Any]:
         grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
         lr = scheduler.get_last_lr()[0]
         optimizer.step()
-        scheduler.step()
+        scheduler.step() if pacer is None else pacer.step(scheduler)
         values = {"loss": float(loss.detach()), **{k: float(v.detach()) for k, v in parts.items()},
                   "target_share": float((batch["labels"] > 0).float().mean())}
         return values, float(grad_norm), lr

@@ -69,6 +69,8 @@ class TrainConfig:
     init: str | None = None
     #: stop after this many seconds of training in one call (None: run all ``steps``)
     time_limit_s: float | None = None
+    #: keep the schedule on pace with ``time_limit_s`` (:class:`~spacepose.tools.training_common.SchedulePacer`)
+    pace_lr: bool = False
     #: loss weight of target pixels relative to background pixels (1: plain mean over valid pixels)
     target_weight: float = 1.0
     #: extra factor for target pixels within ``edge_radius`` px of the silhouette (1: none)
@@ -179,6 +181,7 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     elif cfg.init:
         folded = init_from(model, cfg.init, stereo_cfg, device)
     tc.freeze_folded_batchnorm(model, folded)
+    pacer = tc.SchedulePacer(cfg.steps, cfg.time_limit_s) if (cfg.pace_lr and cfg.time_limit_s) else None
 
     net = tc.wrap_ddp(model, ctx)
 
@@ -216,7 +219,7 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
         optimizer.step()
-        scheduler.step()
+        scheduler.step() if pacer is None else pacer.step(scheduler)
         return {"loss": float(loss.detach()), **_to_float(metrics)}, float(grad_norm), scheduler.get_last_lr()[0]
 
     validate_fn = None if val_set is None else (lambda: validate(model, val_set, device, stereo_cfg.iters or cfg.iters))

@@ -24,7 +24,7 @@ from spacepose.export.metadata import git_commit
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CHECKPOINT_NAME", "EpochSampler", "RunContext", "git_commit", "to_json", "rng_state", "set_rng_state",
+__all__ = ["CHECKPOINT_NAME", "EpochSampler", "RunContext", "SchedulePacer", "git_commit", "to_json", "rng_state", "set_rng_state",
            "seed_all", "atomic_save", "load_checkpoint", "dist_setup", "start_run", "resume_training", "wrap_ddp",
            "JsonlLog", "finish_run", "run_steps"]
 
@@ -200,6 +200,36 @@ def finish_run(log_file: JsonlLog, ctx: RunContext) -> None:
     log_file.close()
     if ctx.world > 1 and dist.is_initialized():
         dist.destroy_process_group()
+
+
+class SchedulePacer:
+    """Keeps a step-indexed learning-rate schedule on pace with a wall-clock budget.
+
+    A run stopped by ``time_limit_s`` before its ``steps`` would end with the learning rate still
+    high. With a pacer, each scheduler step jumps the schedule ahead to
+    ``max(its next step, steps * elapsed / seconds)`` (never past ``steps``), so the schedule has run
+    its course when the time is up, whatever the throughput. The clock starts at construction; a
+    resumed run continues the schedule from the step it had reached (the checkpoint's scheduler).
+    ``step(scheduler)`` replaces ``scheduler.step()`` for any scheduler driven by ``last_epoch``
+    (OneCycleLR, CyclicLR).
+    """
+
+    def __init__(self, steps: int, seconds: float) -> None:
+        if steps < 1 or not seconds > 0:
+            raise SpaceposeError(f"a schedule pacer needs steps >= 1 and seconds > 0 (got {steps}, {seconds})")
+        self.steps, self.seconds = int(steps), float(seconds)
+        self._t0 = time.perf_counter()
+
+    def due(self) -> int:
+        """The schedule step the clock asks for now."""
+        return int(self.steps * (time.perf_counter() - self._t0) / self.seconds)
+
+    def step(self, scheduler: Any) -> int:
+        """Advance ``scheduler`` by one step, or to the step the clock is due at; returns its step."""
+        target = max(scheduler.last_epoch + 1, min(self.due(), self.steps))
+        scheduler.last_epoch = target - 1
+        scheduler.step()
+        return int(scheduler.last_epoch)
 
 
 def run_steps(*, step: int, steps: int, batch: int, workers: int, train_set: Any, sampler: EpochSampler,
