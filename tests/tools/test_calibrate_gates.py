@@ -44,6 +44,12 @@ def test_cli_refuses_test_split_and_writes_json(tmp_path, capsys):
     assert main([str(report), "--out", str(tmp_path / "g.json")]) == 0
     assert json.loads((tmp_path / "g.json").read_text())["proposed"]["kept"] == 2
     assert "proposed: min_confidence" in capsys.readouterr().out
+    import gzip
+
+    packed = tmp_path / "r.json.gz"                       # how older reports are stored
+    packed.write_bytes(gzip.compress(report.read_bytes()))
+    assert main([str(packed), "--out", str(tmp_path / "g2.json")]) == 0
+    assert json.loads((tmp_path / "g2.json").read_text())["proposed"]["kept"] == 2
 
 
 OUTLINE_ROWS = [

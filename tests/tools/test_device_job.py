@@ -29,3 +29,22 @@ def test_device_job_returns_graphs_weights_and_logs(tmp_path):
     assert read_metadata(out / "stereo.onnx")["kind"] == "stereo"
     weights = torch.load(out / "pose_weights.pt", weights_only=False)
     assert "optimizer" not in weights and weights["step"] == 1 and weights["folded_bn"]
+
+
+def test_job_commands_budget_and_kinds(tmp_path):
+    from spacepose.tools.device_job import _with_time_limit, build_parser, job_commands
+
+    args = build_parser().parse_args(["--work", str(tmp_path), "--out", str(tmp_path / "o"), "--kinds", "stereo",
+                                      "--stereo-workers", "14", "--pose-symmetric-flip", "z"])
+    phases = job_commands(args, tmp_path)
+    assert [len(phases[k]) for k in ("render", "recover", "train", "export")] == [1, 1, 1, 1]
+    train = phases["train"][0]
+    assert "train-stereo" in train and "--pace-lr" in train
+    assert train[train.index("--workers") + 1] == "14"
+    assert "export-stereo" in phases["export"][0] and phases["recover"][0][4].endswith("stereo.onnx")
+    limited = _with_time_limit(train, 123.4)
+    assert limited[limited.index("--time-limit-s") + 1] == "123" and len(limited) == len(train)
+    both = job_commands(build_parser().parse_args(["--work", str(tmp_path), "--out", str(tmp_path / "o"),
+                                                   "--pose-symmetric-flip", "z"]), tmp_path)
+    pose = both["train"][1]
+    assert "train-pose" in pose and pose[pose.index("--symmetric-flip") + 1] == "z"

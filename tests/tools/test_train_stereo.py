@@ -139,3 +139,48 @@ def test_time_limit_stops_with_a_resumable_checkpoint(synthetic_dataset, tmp_pat
     assert summary["step"] == 1 and load_checkpoint(out / "last.pt")["step"] == 1
     summary = train_stereo(dataclasses.replace(cfg, time_limit_s=None), resume=True)
     assert summary["step"] == 5
+
+
+def test_schedule_pacer_keeps_the_schedule_on_the_clock(monkeypatch):
+    from spacepose.tools import training_common as tc
+
+    clock = [100.0]
+    monkeypatch.setattr(tc.time, "perf_counter", lambda: clock[0])
+    model = torch.nn.Linear(2, 2)
+    opt = torch.optim.AdamW(model.parameters(), lr=1e-3)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, 1e-3, total_steps=1000 + 100, pct_start=0.01,
+                                                cycle_momentum=False, anneal_strategy="linear")
+    pacer = tc.SchedulePacer(1000, 10.0)
+    assert pacer.step(sched) == 1                 # no time has passed: one step, as without a pacer
+    clock[0] += 5.0                                # half the time: the schedule jumps to step 500
+    assert pacer.step(sched) == 500
+    lr_half = sched.get_last_lr()[0]
+    clock[0] += 0.001                              # ahead of the clock: one step at a time again
+    assert pacer.step(sched) == 501
+    clock[0] += 100.0                              # past the limit: never beyond the run's steps
+    assert pacer.step(sched) == 1000
+    assert sched.get_last_lr()[0] < 0.2 * lr_half  # annealed to (near) its end
+    with pytest.raises(SpaceposeError):
+        tc.SchedulePacer(0, 10.0)
+    with pytest.raises(SpaceposeError):
+        tc.SchedulePacer(10, 0.0)
+
+
+def test_pace_lr_anneals_a_run_stopped_by_its_time_limit(synthetic_dataset, tmp_path):
+    import dataclasses
+
+    base = dataclasses.replace(_cfg(synthetic_dataset, tmp_path / "plain", 10000), time_limit_s=3.0, val_every=10**6,
+                               ckpt_every=10**6, lr=1e-3)
+    train_stereo(base)
+    paced = dataclasses.replace(base, out=str(tmp_path / "paced"), pace_lr=True)
+    train_stereo(paced)
+
+    def schedule_and_steps(out):
+        ckpt = load_checkpoint(out / "last.pt")
+        return ckpt["scheduler"]["last_epoch"], ckpt["step"]
+
+    plain_at, plain_steps = schedule_and_steps(tmp_path / "plain")
+    paced_at, paced_steps = schedule_and_steps(tmp_path / "paced")
+    assert plain_steps < 10000 and paced_steps < 10000     # both stopped by the clock
+    assert plain_at == plain_steps                           # without pacing the schedule is where the steps are
+    assert paced_at >= 9000                                  # paced: it ran (nearly) to its end in the time
