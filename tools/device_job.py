@@ -52,9 +52,9 @@ def job_commands(args: argparse.Namespace, work: Path) -> dict[str, list[list[st
     flip = ["--symmetric-flip", args.pose_symmetric_flip] if args.pose_symmetric_flip else []
     stereo = _spacepose("train-stereo", str(data), "--out", str(work / "stereo"), "--steps", str(args.stereo_steps),
                         "--batch", str(args.stereo_batch), "--train-crop", "160x160", "--init",
-                        str(work / "init_stereo.pt"), "--lr", str(args.stereo_lr), "--workers",
+                        str(args.stereo_init or work / "init_stereo.pt"), "--lr", str(args.stereo_lr), "--workers",
                         str(stereo_workers), "--target-weight", str(args.target_weight), "--edge-weight",
-                        str(args.edge_weight), "--oversample", "mixed=3", "penumbra=2", *common)
+                        str(args.edge_weight), "--oversample", *args.stereo_oversample, *common)
     pose = _spacepose("train-pose", str(data), "--out", str(work / "pose"), "--steps", str(args.pose_steps),
                       "--batch", str(args.pose_batch), "--depth-source", "gt_noisy", "--init",
                       str(work / "init_pose.pt"), "--lr-min", "1e-5", "--lr-max", str(args.pose_lr_max),
@@ -69,7 +69,7 @@ def job_commands(args: argparse.Namespace, work: Path) -> dict[str, list[list[st
     return {
         "render": [_spacepose("render", str(data), "--target", "tdrs", "--count", str(args.frames), "--size",
                               args.size, "--seed", str(args.data_seed), "--workers", str(args.render_workers))],
-        "recover": [recover[kind] for kind in args.kinds],
+        "recover": [recover[kind] for kind in args.kinds if not (kind == "stereo" and args.stereo_init)],
         "train": [train[kind] for kind in args.kinds],
         "export": [export[kind] for kind in args.kinds],
     }
@@ -138,6 +138,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--stereo-batch", type=int, default=16)
     p.add_argument("--pose-batch", type=int, default=16)
     p.add_argument("--stereo-lr", type=float, default=2e-4)
+    p.add_argument("--stereo-init", default=None, help="start the stereo run from these weights (a returned "
+                   "stereo_weights.pt carried along) instead of the bundle's graph")
+    p.add_argument("--stereo-oversample", nargs="+", default=["mixed=3", "penumbra=2"],
+                   help="train-stereo --oversample")
     p.add_argument("--pose-lr-max", type=float, default=1e-3)
     p.add_argument("--target-weight", type=float, default=4.0)
     p.add_argument("--edge-weight", type=float, default=3.0, help="train-stereo --edge-weight (session 6's recipe)")

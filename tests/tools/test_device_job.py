@@ -48,3 +48,10 @@ def test_job_commands_budget_and_kinds(tmp_path):
                                                    "--pose-symmetric-flip", "z"]), tmp_path)
     pose = both["train"][1]
     assert "train-pose" in pose and pose[pose.index("--symmetric-flip") + 1] == "z"
+    resumed = job_commands(build_parser().parse_args(["--work", str(tmp_path), "--out", str(tmp_path / "o"),
+                                                      "--kinds", "stereo", "--stereo-init", "w.pt",
+                                                      "--stereo-oversample", "mixed=4"]), tmp_path)
+    assert resumed["recover"] == []                        # carried weights: nothing to rebuild
+    stereo = resumed["train"][0]
+    assert stereo[stereo.index("--init") + 1] == "w.pt"
+    assert stereo[stereo.index("--oversample") + 1:stereo.index("--oversample") + 3] == ["mixed=4", "--threads"]
