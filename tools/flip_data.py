@@ -35,7 +35,7 @@ from spacepose.tools.labels import read_labels
 log = logging.getLogger(__name__)
 
 __all__ = ["FlipSampleConfig", "perturb_pose", "wrong_pose", "stereo_window", "make_flip_samples", "save_samples",
-           "load_samples", "augment_views"]
+           "load_samples", "samples_info", "augment_views"]
 
 
 @dataclass(frozen=True)
@@ -186,6 +186,17 @@ def load_samples(path: str | Path) -> dict[str, np.ndarray]:
         out = {k: z[k] for k in ("labels", "frame", "regime", "distance")}
     out["views"] = np.concatenate([grey[:, None], outlines], axis=1)
     return out
+
+
+def samples_info(path: str | Path) -> dict[str, Any]:
+    """The settings :func:`save_samples` stored with a cache (``{}`` for a cache without them)."""
+    import ast
+
+    with np.load(path) as z:
+        if "info" not in z.files:
+            return {}
+        info = ast.literal_eval(str(z["info"]))
+    return info if isinstance(info, dict) else {}
 
 
 def augment_views(views: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -58,15 +58,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _samples(path: Path, dataset: Path, bundle: Any, *, split: str | None, per_frame: int, seed: int, size: int,
              limit: int | None, neither_prob: float = 0.0) -> dict[str, np.ndarray]:
-    from spacepose.tools.flip_data import FlipSampleConfig, load_samples, make_flip_samples, save_samples
+    from spacepose.errors import SpaceposeError
+    from spacepose.tools.flip_data import (FlipSampleConfig, load_samples, make_flip_samples, samples_info,
+                                           save_samples)
 
-    if path.is_file():
+    settings = {"dataset": str(dataset), "split": split, "per_frame": per_frame, "seed": seed,
+                "neither_prob": neither_prob, "size": size, "limit": limit}
+    if path.is_file():   # a resumed run reuses its cache, but only one made with the same settings
+        have = samples_info(path)
+        differ = {k: (have[k], v) for k, v in settings.items() if k in have and have[k] != v}
+        if differ:
+            raise SpaceposeError(f"{path} was made with other settings (cached, asked): {differ}; remove it or "
+                                 "train into another --out")
         return load_samples(path)
     t0 = time.perf_counter()
     samples = make_flip_samples(dataset, bundle.silhouette_points, bundle.centre, split=split, per_frame=per_frame,
                                 seed=seed, config=FlipSampleConfig(size=size, neither_prob=neither_prob), limit=limit)
-    save_samples(samples, path, {"dataset": str(dataset), "split": split, "per_frame": per_frame, "seed": seed,
-                                 "neither_prob": neither_prob})
+    save_samples(samples, path, settings)
     log.info("%s: %d samples in %.0f s", path.name, len(samples["labels"]), time.perf_counter() - t0)
     return load_samples(path)
 

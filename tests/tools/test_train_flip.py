@@ -138,6 +138,8 @@ def test_train_resume_and_export(synthetic_dataset, plate_bundle, tmp_path):
             "--ckpt-every", "3", "--val-every", "3"]
     assert main(args + ["--steps", "3"]) == 0
     assert main(args + ["--steps", "3"]) == 2                     # refuses to overwrite without --resume
+    assert main(args + ["--steps", "6", "--resume", "--per-frame", "3"]) == 2   # not the cache's settings
+    assert main(args + ["--steps", "6", "--resume", "--neither-prob", "0.2"]) == 2
     assert main(args + ["--steps", "6", "--resume"]) == 0
     ckpt = torch.load(out / "last.pt", weights_only=False)
     assert ckpt["step"] == 6 and ckpt["kind"] == "flip"
