@@ -55,7 +55,8 @@ from .profiler import StageTimer
 from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
 from .silhouette import decide_outline, polish_pose
 
-__all__ = ["PoseResult", "PoseEstimator", "rotation_to_quaternion", "pose_crop_window", "refine_icp"]
+__all__ = ["PoseResult", "PoseEstimator", "DECISION_ROUTES", "rotation_to_quaternion", "pose_crop_window",
+           "refine_icp"]
 
 logger = logging.getLogger(__name__)
 
@@ -68,6 +69,19 @@ SATURATED_FRACTION = 0.5
 PRIOR_MAX_GAP = 0
 #: statuses after which a frame run in the previous pose's window is run again with the coarse pass
 _WINDOW_MISSES = frozenset({"no_target", "too_few_points", "out_of_range", "fit_residual"})
+
+#: what can pick a valid pose from its flip (``PoseResult.decided_by``); the stage records its index
+#: as the float factor ``route`` (0: no route recorded, a pose from the keypoint votes)
+DECISION_ROUTES = ("votes", "outline", "image", "registration", "classifier", "tracked")
+
+
+def _route_code(name: str) -> float:
+    return float(DECISION_ROUTES.index(name))
+
+
+def _route_name(factors: dict[str, float]) -> str:
+    code = factors.get("route", 0.0)
+    return DECISION_ROUTES[int(code)] if 0 <= code < len(DECISION_ROUTES) else "votes"
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,6 +127,11 @@ class PoseResult:
             run. Not part of the JSON line.
         decided: ``(R, t)`` before the polish, when it moved the pose (the next frame's tracking
             compares with it: the tracking gates were set on unpolished poses); ``None`` otherwise.
+        decided_by: for a valid pose, what picked it from its flip (:data:`DECISION_ROUTES`):
+            ``"outline"`` (the outline's fit and margin), ``"image"`` (the image vote's route of the
+            silhouette stage), ``"registration"`` (the stereo points' score gap), ``"classifier"`` (the
+            flip classifier), ``"tracked"`` (the prior) or ``"votes"`` (the keypoint votes, bundles
+            without registration); ``""`` for an invalid result. Not part of the JSON line.
     """
 
     R: np.ndarray
@@ -138,6 +157,7 @@ class PoseResult:
     polish_m: float = float("nan")
     flip_prob: float = float("nan")
     decided: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    decided_by: str = ""
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -430,7 +450,8 @@ class PoseEstimator:
                             outline_image_background=factor("outline_image_background"),
                             outline_image_pixels=factor("outline_image_pixels"),
                             polish_deg=factor("polish_deg"), polish_m=factor("polish_m"),
-                            flip_prob=factor("flip_prob"), decided=stage.decided if valid else None)
+                            flip_prob=factor("flip_prob"), decided=stage.decided if valid else None,
+                            decided_by=_route_name(factors) if valid else "")
         if status == "bad_input":  # a bad frame says nothing about where the target is: the prior stays as it was
             return result
         with self._lock:
@@ -565,6 +586,8 @@ class PoseEstimator:
                     "the outline and the stereo points pick opposite poses (the pose and its flip)")
             R, t = outline.best.R, outline.best.t
             confidence = reg.inlier_fraction * (1.0 - math.exp(-outline.margin_px / max(sil.min_margin_px, 1e-9)))
+            by_margin = outline.best.chamfer_px <= sil.max_chamfer_px and outline.margin_px >= sil.min_margin_px
+            factors["route"] = _route_code("outline" if by_margin else "image")
         elif conclusive:
             if outline is not None and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:
                 # the stereo points decide, but the outline, undecided as it is, leans to the flip: on
@@ -579,10 +602,12 @@ class PoseEstimator:
             if outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px:
                 R, t = outline.best.R, outline.best.t
             confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))
+            factors["route"] = _route_code("registration")
         elif learned is not None:
             R, t = learned
             confidence = reg.inlier_fraction * abs(2.0 * flip_p - 1.0)
             factors["flip_decided"] = 1.0
+            factors["route"] = _route_code("classifier")
         else:
             tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
             refined = []
@@ -607,6 +632,7 @@ class PoseEstimator:
                 R, t = tracked
             confidence = 0.5 * reg.inlier_fraction
             factors["tracked"] = 1.0
+            factors["route"] = _route_code("tracked")
         if not factors.get("tracked") and prior is not None and (turned := float(rotation_angle_deg(prior[0], R))) > 90.0:
             # decided on its own, yet half turned from the prior: one of the two is
             # wrong and nothing says which; report neither, and the next frame starts without a prior

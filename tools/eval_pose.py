@@ -235,7 +235,7 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
                "outline_image_background": float(result.outline_image_background),
                "outline_image_pixels": float(result.outline_image_pixels),
                "polish_deg": float(result.polish_deg), "polish_m": float(result.polish_m),
-               "flip_prob": float(result.flip_prob),
+               "flip_prob": float(result.flip_prob), "decided_by": result.decided_by,
                "R": np.asarray(result.R).tolist(), "t": np.asarray(result.t).tolist()}
         rows.append(row)
         if classical is not None:

@@ -110,7 +110,8 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
                "e_t": translation_error(rec.t, res.t) if res.valid else float("nan"),
                "e_R": rotation_error_deg(rec.R, res.R) if res.valid else float("nan"),
                "outline_chamfer_px": float(res.outline_chamfer_px), "outline_margin_px": float(res.outline_margin_px),
-               "outline_image_score": float(res.outline_image_score), "detail": res.detail}
+               "outline_image_score": float(res.outline_image_score), "decided_by": res.decided_by,
+               "detail": res.detail}
         rows.append(row)
     valid = [r for r in rows if r["valid"]]
     first = next((i for i, r in enumerate(rows) if r["valid"]), None)

@@ -205,8 +205,9 @@ def test_the_classifier_decides_open_frames_and_vetoes_decided_ones(tmp_path, mo
     assert res.valid == valid, res.detail
     if valid:
         assert (rotation_angle_deg(res.R, seen["R"]) > 90.0) == flipped
+        assert res.decided_by == ("outline" if margin >= 0.5 else "classifier")
     else:
-        assert res.status == "weak_votes"
+        assert res.status == "weak_votes" and res.decided_by == ""
     if prob <= 0.1 and margin >= 0.5:
         assert "flip classifier" in res.detail
 

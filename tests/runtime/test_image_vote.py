@@ -256,6 +256,7 @@ def test_the_estimator_gives_the_left_image_to_the_vote_and_reports_it(tmp_path,
     res = est.estimate(left, right)
     assert seen["image"] is not None and seen["image"].shape[:2] == left.shape[:2]
     assert res.valid and res.outline_image_score == 0.25 and res.outline_image_background == 0.0
+    assert res.decided_by == "image"         # a 0.3 px margin: the margin route (5 px) would not decide
     assert 0.0 < res.confidence < 1.0
     # the same frame, the vote against it: undecided, and the reason names the outline
     monkeypatch.setattr(estimator_module, "decide_outline", lambda *a, **k: dataclasses.replace(

@@ -402,12 +402,14 @@ def test_the_estimator_decides_by_the_outline(tmp_path):
     est = _estimator(tmp_path, {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0})
     res = est.estimate(left, right)
     assert res.valid and res.status == "ok" and "silhouette" in res.timings_ms
+    assert res.decided_by == "outline"
     assert np.isfinite(res.outline_chamfer_px) and res.outline_chamfer_px < 2.0
     assert abs(abs(res.R[2, 2]) - 1.0) < 0.05 and abs(res.t[2] - 9.0) < 0.5    # the plate, facing the camera
     # the plate's flip about z is the plate again: no margin, so demanding one leaves the frame undecided
     strict = _estimator(tmp_path / "s", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 5.0})
     res = strict.estimate(left, right)
     assert not res.valid and res.status == "weak_votes" and "the outline does not decide" in res.detail
+    assert res.decided_by == ""
     assert np.isfinite(res.outline_margin_px) and res.outline_margin_px < 5.0
 
 
@@ -498,7 +500,7 @@ def test_a_tracked_frame_reports_the_outline_refined_pose_and_falls_back_when_it
 
     monkeypatch.setattr(estimator_module, "decide_outline", refined)
     res = est.estimate(left, right)
-    assert res.valid and res.tracked
+    assert res.valid and res.tracked and res.decided_by == "tracked"
     assert rotation_angle_deg(res.R, nudged) < 1e-9           # the refined pose on the prior's side
     # the checks refuse the refined pose: the registered candidate it came from is reported instead
     original = est._verify
@@ -529,7 +531,8 @@ def test_a_registration_decision_the_outline_leans_against_is_not_reported(tmp_p
     left, right = synthetic_pair()
     # the registration decides (min_margin 0) and the outline does not (a 5 px margin demanded)
     est = _estimator(tmp_path, {"min_margin": 0.0}, {"max_chamfer_px": 100.0, "min_margin_px": 5.0})
-    assert est.estimate(left, right).valid
+    decided = est.estimate(left, right)
+    assert decided.valid and decided.decided_by == "registration"
 
     def leaning(candidates, *args, **kwargs):   # undecided, but its best fit is the flip
         R, t = candidates[0]

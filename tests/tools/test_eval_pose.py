@@ -86,6 +86,7 @@ def test_full_pipeline_with_baseline(tmp_path_factory, tmp_path, monkeypatch, ca
     assert report["baseline"]["overall"]["e_t_mean"] >= 0.0
     for f in report["frames"]:
         assert f["status"] in ("ok", "no_target", "too_few_points", "weak_votes", "fit_residual", "out_of_range")
+        assert (f["decided_by"] != "") == f["valid"]   # what picked a valid pose from its flip; "" otherwise
     assert (out / "fig14_errors_vs_distance.png").is_file() and (out / "pose_eval.md").is_file()
     assert [p.suffix for p in (out / "overlays").iterdir()] == [".jpg"]
     assert "baseline (classical)" in capsys.readouterr().out
