@@ -3,15 +3,17 @@
 The device machine receives the working tree (at most 64 MiB: the 7.9 GB dataset cannot travel) and
 has torch but neither trimesh nor embreex; it returns at most 8 files of 16 MiB. So the job renders its
 own data there on the machine's CPU cores (the two packages travel as wheels), rebuilds training
-checkpoints from the shipped graphs (``spacepose recover-checkpoint``), fine-tunes the stereo and pose
-networks at once (two processes sharing the GPU, each under a wall-clock limit), exports both graphs
-with their parity checks, and writes them with the logs into ``--out``::
+checkpoints from the shipped graphs (``spacepose recover-checkpoint``) or takes carried weights
+(``--stereo-init``), fine-tunes the networks ``--kinds`` names (both at once by default: two processes
+sharing the GPU, each under a wall-clock limit, their learning-rate schedules paced to end by it),
+exports the graphs with their parity checks, and writes them with the logs into ``--out``. With
+``--budget-s`` the training gets what the whole job's budget leaves after rendering::
 
-    python -m spacepose.tools.device_job --work /tmp/job --out "$OUT" --frames 3000 \\
-        --stereo-steps 20000 --pose-steps 20000 --time-limit-s 360 --render-workers 14
+    python -m spacepose.tools.device_job --work /tmp/job --out "$OUT" --frames 4000 --kinds stereo \\
+        --stereo-workers 14 --stereo-steps 12000 --time-limit-s 420 --budget-s 520 --render-workers 15
 
-What comes back (``--out``): ``stereo.onnx``, ``pose.onnx``, ``stereo_weights.pt`` and
-``pose_weights.pt`` (model-only state dicts, small enough to come back; ``--init`` takes them after
+What comes back (``--out``, for the kinds trained): ``stereo.onnx``, ``pose.onnx``,
+``stereo_weights.pt`` and ``pose_weights.pt`` (model-only state dicts, small enough to come back; ``--init`` takes them after
 ``spacepose recover-checkpoint`` or directly), ``stereo_log.jsonl``, ``pose_log.jsonl`` and
 ``job.json`` (commands, timings, final losses). Nothing is written outside ``--work`` and ``--out``.
 The same job runs on a CPU with small numbers (the test does), which is how it is checked before a
@@ -193,7 +195,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             trained = tuple(kind for kind, code in zip(args.kinds, codes) if code == 0)
             _collect(work, out, weights=True)
         (out / "job.json").write_text(json.dumps({**report, "ok": None}, indent=2))
-        if name in ("render", "recover") and any(codes) or not trained:
+        if (name in ("render", "recover") and any(codes)) or not trained:
             break
     _collect(work, out, weights=False)
     report["ok"] = ok
