@@ -13,8 +13,8 @@ exports the graphs with their parity checks, and writes them with the logs into 
         --stereo-workers 14 --stereo-steps 12000 --time-limit-s 420 --budget-s 520 --render-workers 15
 
 What comes back (``--out``, for the kinds trained): ``stereo.onnx``, ``pose.onnx``,
-``stereo_weights.pt`` and ``pose_weights.pt`` (model-only state dicts, small enough to come back; ``--init`` takes them after
-``spacepose recover-checkpoint`` or directly), ``stereo_log.jsonl``, ``pose_log.jsonl`` and
+``stereo_weights.pt`` and ``pose_weights.pt`` (model-only state dicts, small enough to come back;
+``--init`` takes them after ``spacepose recover-checkpoint`` or directly), ``stereo_log.jsonl``, ``pose_log.jsonl`` and
 ``job.json`` (commands, timings, final losses). Nothing is written outside ``--work`` and ``--out``.
 The same job runs on a CPU with small numbers (the test does), which is how it is checked before a
 machine is lent. The model card's "training on a lent accelerator" section has the full ``run`` call.

@@ -25,8 +25,8 @@ from spacepose.export.metadata import git_commit
 log = logging.getLogger(__name__)
 
 __all__ = ["CHECKPOINT_NAME", "EpochSampler", "RunContext", "SchedulePacer", "git_commit", "to_json", "rng_state",
-           "set_rng_state", "seed_all", "atomic_save", "load_checkpoint", "dist_setup", "start_run", "resume_training", "wrap_ddp",
-           "JsonlLog", "finish_run", "run_steps"]
+           "set_rng_state", "seed_all", "atomic_save", "load_checkpoint", "dist_setup", "start_run",
+           "resume_training", "wrap_ddp", "JsonlLog", "finish_run", "run_steps"]
 
 CHECKPOINT_NAME = "last.pt"
 
