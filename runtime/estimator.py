@@ -647,6 +647,12 @@ class PoseEstimator:
                 factors.update(polish_deg=float(rotation_angle_deg(R, polished.R)),
                                polish_m=float(np.linalg.norm(polished.t - np.asarray(t))))
                 decided, (R, t) = (R, t), (polished.R, polished.t)
+        if factors.get("flip_decided") and (cap := bundle.flip_classifier.max_polish_deg) > 0.0:
+            moved = factors.get("polish_deg", float("nan")) if decided is not None else float("nan")
+            if not moved <= cap:   # NaN (no polish, or one not used) refuses too
+                return _stage_invalid(stage, "weak_votes", factors), (
+                    f"the flip classifier decided the pose, but the polish turned it {moved:.1f}° "
+                    f"(more than {cap:.1f}°, or it did not run)")
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),

@@ -41,6 +41,10 @@ class FlipClassifierConfig:
         (> 1 never decides). veto_prob: a decided pose it gives at most this is refused (< 0 never
         vetoes). max_chamfer_px: the outline fit (outline px) a pose it decides must reach.
     min_margin_px: the least outline margin of a frame it decides (0: any).
+    max_polish_deg: a pose it decides is refused when the silhouette stage's polish turns it by more
+        than this (degrees), or when the polish does not run or is not used; 0: no such check. On the
+        calibration frames of session 18, the classifier-decided poses that were wrong were ones the
+        polish moved far (the model card, "The flip classifier").
     """
 
     file: str = "flip.onnx"
@@ -50,6 +54,7 @@ class FlipClassifierConfig:
     veto_prob: float = -1.0
     max_chamfer_px: float = 2.0
     min_margin_px: float = 0.0
+    max_polish_deg: float = 0.0
 
     def __post_init__(self) -> None:
         if self.size < 16:
@@ -59,8 +64,8 @@ class FlipClassifierConfig:
         if self.decide_prob <= 0.5 or self.veto_prob >= 0.5:
             raise ValueError(f"flip_classifier: decide_prob must be > 0.5 and veto_prob < 0.5, "
                              f"got {self.decide_prob}, {self.veto_prob}")
-        if self.max_chamfer_px < 0 or self.min_margin_px < 0:
-            raise ValueError("flip_classifier: max_chamfer_px and min_margin_px must be >= 0")
+        if self.max_chamfer_px < 0 or self.min_margin_px < 0 or self.max_polish_deg < 0:
+            raise ValueError("flip_classifier: max_chamfer_px, min_margin_px and max_polish_deg must be >= 0")
 
 
 def parse_flip_classifier(section: Any) -> FlipClassifierConfig | None:

@@ -146,15 +146,16 @@ def test_bundle_section_needs_the_silhouette_stage_and_the_graph(tmp_path):
     assert load_bundle(est.bundle.path).flip_classifier == FlipClassifierConfig(size=SIZE)
 
 
-def _flip_estimator(tmp_path, monkeypatch, prob, **section):
-    """The outline-stage estimator of test_silhouette with a flip graph whose probability is ``prob``."""
+def _flip_estimator(tmp_path, monkeypatch, prob, silhouette=None, **section):
+    """The outline-stage estimator of test_silhouette with a flip graph whose probability is ``prob``
+    (``silhouette``: more keys of the bundle's silhouette section)."""
     from test_silhouette import _estimator
 
     from spacepose.calibration.rig import paper_rig
     from spacepose.estimator import PoseEstimator
 
     est = _estimator(tmp_path, {"min_margin": 0.99}, {"max_chamfer_px": 1.0, "min_margin_px": 0.5, "image_vote": 1,
-                                                      "image_veto_score": 0.0})
+                                                      "image_veto_score": 0.0, **(silhouette or {})})
     data = json.loads((est.bundle.path / "bundle.json").read_text())
     data["flip_classifier"] = {"size": SIZE, "decide_prob": 0.9, "veto_prob": 0.1, "max_chamfer_px": 1.5, **section}
     (est.bundle.path / "bundle.json").write_text(json.dumps(data))
@@ -210,6 +211,44 @@ def test_the_classifier_decides_open_frames_and_vetoes_decided_ones(tmp_path, mo
         assert res.status == "weak_votes" and res.decided_by == ""
     if prob <= 0.1 and margin >= 0.5:
         assert "flip classifier" in res.detail
+
+
+@pytest.mark.parametrize("margin, turn, polished, valid", [
+    (0.3, 1.0, True, True),      # the classifier decides, the polish turns it 1°: kept (cap 2°)
+    (0.3, 3.0, True, False),     # ... 3°: refused
+    (0.3, 0.0, False, False),    # ... the polish not used: refused
+    (0.8, 3.0, True, True),      # the outline decides: the cap is the classifier's alone
+])
+def test_a_classifier_decision_the_polish_turns_far_is_refused(tmp_path, monkeypatch, margin, turn, polished, valid):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.registration import exp_so3, rotation_angle_deg
+    from spacepose.silhouette import OutlineFit
+
+    left, right = synthetic_pair()
+    est = _flip_estimator(tmp_path, monkeypatch, 0.95, silhouette={"polish": 1}, max_polish_deg=2.0)
+    assert est.bundle.flip_classifier.max_polish_deg == 2.0
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 1.2 if margin < 0.5 else 0.5, margin))
+    turned = exp_so3(np.array([np.radians(turn), 0.0, 0.0]))
+
+    def polish(outline, R, t, *args, **kwargs):
+        return OutlineFit(turned @ R, np.asarray(t), 0.5) if polished else None
+
+    monkeypatch.setattr(estimator_module, "polish_pose", polish)
+    res = est.estimate(left, right)
+    assert res.valid == valid, res.detail
+    if valid:
+        assert res.decided_by == ("classifier" if margin < 0.5 else "outline")
+        assert abs(res.polish_deg - turn) < 1e-6 and rotation_angle_deg(res.R, res.decided[0]) > 0.5
+    else:
+        assert res.status == "weak_votes" and "polish" in res.detail
+
+
+def test_bundle_refuses_a_negative_polish_cap():
+    from spacepose.flip_classifier import parse_flip_classifier
+
+    with pytest.raises(BundleError, match="max_polish_deg"):
+        parse_flip_classifier({"max_polish_deg": -1.0})
 
 
 def test_without_a_classifier_nothing_changes(tmp_path, monkeypatch):
