@@ -8,11 +8,12 @@ back with :func:`spacepose.onnx_session.session_metadata` and checks it
 from __future__ import annotations
 
 import datetime as _dt
+import os
 import subprocess
 from pathlib import Path
 from typing import Any, Mapping
 
-__all__ = ["SCHEMA_VERSION", "STEREO_NORMALISATION", "stereo_metadata", "git_commit", "provenance", "with_extra"]
+__all__ = ["SCHEMA_VERSION", "STEREO_NORMALISATION", "COMMIT_ENV", "stereo_metadata", "git_commit", "provenance", "with_extra"]
 
 SCHEMA_VERSION = 1
 
@@ -22,14 +23,29 @@ SCHEMA_VERSION = 1
 STEREO_NORMALISATION = "rgb_0_255"
 
 
+#: environment variable that names the source commit when the tree's own ``.git`` does not (a copy of the
+#: working tree on a lent accelerator carries a ``.git`` from an older checkout)
+COMMIT_ENV = "SPACEPOSE_COMMIT"
+
+
 def git_commit(cwd: str | Path | None = None) -> str | None:
-    """``git rev-parse HEAD`` of the source tree, or None when git or the repo is unavailable."""
+    """The commit the source tree is at: ``$SPACEPOSE_COMMIT`` when set, else ``git rev-parse HEAD`` with
+    ``+dirty`` appended when tracked files differ from it; None when git or the repo is unavailable."""
+    named = os.environ.get(COMMIT_ENV, "").strip()
+    if named:
+        return named
+    where = cwd or Path(__file__).resolve().parent
     try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd or Path(__file__).resolve().parent,
-                             capture_output=True, text=True, timeout=10, check=True)
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where, capture_output=True, text=True, timeout=10,
+                             check=True)
+        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=where,
+                                capture_output=True, text=True, timeout=30, check=True)
     except (OSError, subprocess.SubprocessError):
         return None
-    return out.stdout.strip() or None
+    head = out.stdout.strip()
+    if not head:
+        return None
+    return head + "+dirty" if status.stdout.strip() else head
 
 
 def provenance(*, dataset: Mapping[str, Any] | None = None, training_commit: str | None = None,

@@ -138,7 +138,8 @@ def export_checkpoint(ckpt_path: str | os.PathLike, out: str | os.PathLike, *, i
     model, config = model_from_checkpoint(ckpt)
     train_cfg = ckpt.get("train_config", {})
     dataset = dict(ckpt.get("dataset", {}))
-    dataset.setdefault("seed", train_cfg.get("seed"))
+    if "seed" not in dataset:   # a checkpoint from before session 20 names no data seed: say which seed it has
+        dataset["training_seed"] = train_cfg.get("seed")
     meta = stereo_metadata(input_size=size, iters=iters, stereo_config=config.to_dict(), dataset=dataset,
                            training_commit=ckpt.get("commit"), metrics=metrics,
                            extra={"training": {"step": ckpt.get("step"), "train_iters": train_cfg.get("iters"),

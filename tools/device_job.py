@@ -15,7 +15,8 @@ exports the graphs with their parity checks, and writes them with the logs into 
 What comes back (``--out``, for the kinds trained): ``stereo.onnx``, ``pose.onnx``,
 ``stereo_weights.pt`` and ``pose_weights.pt`` (model-only state dicts, small enough to come back;
 ``--init`` takes them after ``spacepose recover-checkpoint`` or directly), ``stereo_log.jsonl``, ``pose_log.jsonl`` and
-``job.json`` (commands, timings, final losses). Nothing is written outside ``--work`` and ``--out``.
+``job.json`` (commands, timings, final losses). ``--commit`` names the source commit the checkpoints and
+graphs record (``$SPACEPOSE_COMMIT``): the copy's ``.git`` there is not the tree's. Nothing is written outside ``--work`` and ``--out``.
 The same job runs on a CPU with small numbers (the test does), which is how it is checked before a
 machine is lent. The model card's "training on a lent accelerator" section has the full ``run`` call.
 """
@@ -25,12 +26,15 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import shutil
 import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Sequence
+
+from spacepose.export.metadata import COMMIT_ENV
 
 log = logging.getLogger(__name__)
 
@@ -77,12 +81,12 @@ def job_commands(args: argparse.Namespace, work: Path) -> dict[str, list[list[st
     }
 
 
-def _run_all(commands: list[list[str]], logs: list[Path]) -> list[int]:
+def _run_all(commands: list[list[str]], logs: list[Path], env: dict[str, str] | None = None) -> list[int]:
     """Start the commands at once, each writing to its log; wait for all; their exit codes."""
     procs = []
     for cmd, path in zip(commands, logs):
         handle = path.open("w")
-        procs.append((subprocess.Popen(cmd, stdout=handle, stderr=subprocess.STDOUT), handle))
+        procs.append((subprocess.Popen(cmd, stdout=handle, stderr=subprocess.STDOUT, env=env), handle))
     codes = []
     for proc, handle in procs:
         codes.append(proc.wait())
@@ -157,6 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--export-reserve-s", type=float, default=75.0)
     p.add_argument("--val-every", type=int, default=1000)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--commit", default=None, help="the source commit the checkpoints and graphs record (the local "
+                   "HEAD, written into the call): the device copy's .git is not the tree's; sets $SPACEPOSE_COMMIT")
     return p
 
 
@@ -164,6 +170,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     args = build_parser().parse_args(argv)
     work, out = args.work, args.out
+    env = {**os.environ, COMMIT_ENV: args.commit} if args.commit else None   # for every phase's process
     work.mkdir(parents=True, exist_ok=True)
     out.mkdir(parents=True, exist_ok=True)
     (work / "export").mkdir(exist_ok=True)
@@ -183,8 +190,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             commands = [cmd for kind, cmd in zip(args.kinds, commands) if kind in trained]
         t0 = time.perf_counter()
         logs = [work / f"{name}_{i}.log" for i in range(len(commands))]
-        codes = _run_all(commands, logs) if name in ("train", "export") else [
-            _run_all([cmd], [path])[0] for cmd, path in zip(commands, logs)]
+        codes = _run_all(commands, logs, env) if name in ("train", "export") else [
+            _run_all([cmd], [path], env)[0] for cmd, path in zip(commands, logs)]
         seconds = time.perf_counter() - t0
         tails = [path.read_text(errors="replace")[-1500:] for path in logs]
         report["phases"][name] = {"seconds": round(seconds, 1), "exit_codes": codes,

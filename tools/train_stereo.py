@@ -28,6 +28,7 @@ from spacepose.errors import DatasetError, SpaceposeError
 from spacepose.models.stereo_config import StereoConfig
 from spacepose.models.stereo_loss import pixel_weights
 from spacepose.tools import training_common as tc
+from spacepose.tools.pose_data import dataset_info
 from spacepose.tools.stereo_data import StereoCropConfig, StereoCropDataset
 from spacepose.tools.training_common import CHECKPOINT_NAME, EpochSampler, git_commit
 
@@ -158,6 +159,19 @@ def validate(model: torch.nn.Module, dataset: StereoCropDataset, device: torch.d
     return {"val_epe": err_sum / max(n, 1), "val_bad3": 100.0 * bad3 / max(n, 1), "val_pixels": float(n)}
 
 
+def dataset_record(cfg: TrainConfig, train_set: StereoCropDataset) -> dict[str, Any]:
+    """What the checkpoint (and the exported graph) records of the training data: the rendered set's own seed
+    and frame count (``dataset.json``; not the training seed), the distinct train frames and, with
+    ``--oversample``, the samples per epoch and the factors."""
+    info = dataset_info(cfg.dataset)
+    frames = len({rec.frame for rec in train_set.records})
+    doc: dict[str, Any] = {"path": str(cfg.dataset), "seed": info.get("seed"), "size": info.get("count"),
+                           "image_size": info.get("size"), "train_frames": frames}
+    if cfg.oversample:
+        doc.update(train_samples=len(train_set), oversample=dict(cfg.oversample))
+    return doc
+
+
 def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     """Run (or resume) training; returns a summary dict (final step, last losses, checkpoint path)."""
     ctx = tc.start_run(cfg.out, resume=resume, threads=cfg.threads)
@@ -194,9 +208,11 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         val_set = None
         log.warning("no test split: validation disabled")
     sampler = EpochSampler(len(train_set), cfg.seed, rank, world)
+    dataset_doc = dataset_record(cfg, train_set)
     if rank == 0:
         config_doc = {"train": dataclasses.asdict(cfg), "stereo": stereo_cfg.to_dict(), "world_size": world,
-                      "device": str(device), "commit": git_commit(), "train_frames": len(train_set)}
+                      "device": str(device), "commit": git_commit(), "train_frames": len(train_set),
+                      "dataset": dataset_doc}
         (out / "config.json").write_text(json.dumps(config_doc, indent=2, default=list))
     log_file = tc.JsonlLog(out / "log.jsonl", rank == 0)
 
@@ -207,7 +223,7 @@ def train_stereo(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
                         "scheduler": scheduler.state_dict(), "step": step, "rng": tc.rng_state(),
                         "train_config": tc.to_json(dataclasses.asdict(cfg)),
                         "stereo_config": stereo_cfg.to_dict(), "commit": git_commit(), "folded_bn": folded,
-                        "dataset": {"path": str(cfg.dataset), "train_frames": len(train_set)}}, ckpt_path)
+                        "dataset": dataset_doc}, ckpt_path)
 
     def train_step(batch: dict[str, Any]) -> tuple[dict[str, float], float, float]:
         left, right = batch["left"].to(device), batch["right"].to(device)

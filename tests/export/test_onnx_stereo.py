@@ -107,3 +107,24 @@ def test_write_stereo_manifest_merges_and_reads_training_rig(tmp_path):
     assert data["metrics"] == {"pose": {"e_t": 1}, "stereo": {"epe": 0.5}}
     assert data["stereo"]["input_size"] == [256, 256] and data["stereo"]["normalisation"] == "rgb_0_255"
     assert data["rig"] == {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0}
+
+
+def test_git_commit_names_the_tree_and_its_changes(tmp_path, monkeypatch):
+    import subprocess
+
+    from spacepose.export.metadata import COMMIT_ENV, git_commit
+
+    monkeypatch.delenv(COMMIT_ENV, raising=False)
+    assert git_commit(tmp_path) is None                       # not a repository
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(tmp_path)]
+    subprocess.run(git + ["init", "-q"], check=True)
+    (tmp_path / "a.txt").write_text("1")
+    subprocess.run(git + ["add", "a.txt"], check=True)
+    subprocess.run(git + ["commit", "-qm", "one"], check=True)
+    head = subprocess.run(git + ["rev-parse", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
+    (tmp_path / "untracked.txt").write_text("x")
+    assert git_commit(tmp_path) == head                       # untracked files do not count
+    (tmp_path / "a.txt").write_text("2")
+    assert git_commit(tmp_path) == head + "+dirty"
+    monkeypatch.setenv(COMMIT_ENV, "abc123")
+    assert git_commit(tmp_path) == "abc123"

@@ -18,7 +18,7 @@ def test_device_job_returns_graphs_weights_and_logs(tmp_path):
     code = main(["--work", str(tmp_path / "work"), "--out", str(out), "--frames", "10", "--size", "320x240",
                  "--render-workers", "1", "--loader-workers", "0", "--threads", "1", "--stereo-steps", "1",
                  "--pose-steps", "1", "--stereo-batch", "2", "--pose-batch", "2", "--val-every", "100",
-                 "--time-limit-s", "600"])
+                 "--time-limit-s", "600", "--commit", "feedbeef"])
     report = json.loads((out / "job.json").read_text())
     assert code == 0 and report["ok"], json.dumps(report["phases"], indent=1)[-3000:]
     assert set(report["phases"]) == {"render", "recover", "train", "export"}
@@ -26,7 +26,9 @@ def test_device_job_returns_graphs_weights_and_logs(tmp_path):
     assert {"stereo.onnx", "pose.onnx", "stereo_weights.pt", "pose_weights.pt", "stereo_log.jsonl",
             "pose_log.jsonl", "job.json"} <= names
     assert all((out / n).stat().st_size < 16 * 2**20 for n in names)     # what a device call can return
-    assert read_metadata(out / "stereo.onnx")["kind"] == "stereo"
+    meta = read_metadata(out / "stereo.onnx")
+    assert meta["kind"] == "stereo" and meta["training_commit"] == "feedbeef"    # not the copy's stale .git
+    assert meta["dataset"]["seed"] == 11 and meta["dataset"]["train_frames"] == 9   # the data rendered there
     weights = torch.load(out / "pose_weights.pt", weights_only=False)
     assert "optimizer" not in weights and weights["step"] == 1 and weights["folded_bn"]
 

@@ -1,4 +1,5 @@
 import json
+import shutil
 
 import pytest
 
@@ -74,7 +75,10 @@ def test_init_fine_tunes_from_weights_with_fresh_schedule(synthetic_dataset, tmp
     train_stereo(_cfg(synthetic_dataset, base, 2))
     saved = load_checkpoint(base / "last.pt")
     ft = tmp_path / "ft"
-    cfg = dataclasses.replace(_cfg(synthetic_dataset, ft, 1), init=str(base / "last.pt"), val_every=100,
+    data = tmp_path / "data"     # a copy with a rendered set's manifest: its seed is what the checkpoint records
+    shutil.copytree(synthetic_dataset, data)
+    (data / "dataset.json").write_text(json.dumps({"seed": 42, "count": 10, "size": [64, 48]}))
+    cfg = dataclasses.replace(_cfg(data, ft, 1), init=str(base / "last.pt"), val_every=100,
                               oversample={"mixed": 3})
     from spacepose.tools import train_stereo as ts
 
@@ -95,7 +99,12 @@ def test_init_fine_tunes_from_weights_with_fresh_schedule(synthetic_dataset, tmp
     ckpt = load_checkpoint(ft / "last.pt")
     assert ckpt["step"] == 1 and ckpt["scheduler"]["last_epoch"] == 1  # a new schedule, not the old one's
     doc = json.loads((ft / "config.json").read_text())
-    assert doc["train_frames"] == 6 + 2 * sum(r == "mixed" for r in _regimes(synthetic_dataset))
+    samples = 6 + 2 * sum(r == "mixed" for r in _regimes(synthetic_dataset))
+    assert doc["train_frames"] == samples
+    assert ckpt["dataset"] == doc["dataset"] == {"path": str(data), "seed": 42, "size": 10, "image_size": [64, 48],
+                                                 "train_frames": 6, "train_samples": samples,
+                                                 "oversample": {"mixed": 3}}
+    assert saved["dataset"]["seed"] is None and "train_samples" not in saved["dataset"]  # no manifest, no oversample
     other = dataclasses.replace(cfg, out=str(tmp_path / "bad"), stereo={**TINY, "reg_widths": [8, 8, 8, 16]})
     with pytest.raises(SpaceposeError, match="differs"):
         train_stereo(other)
@@ -184,3 +193,27 @@ def test_pace_lr_anneals_a_run_stopped_by_its_time_limit(synthetic_dataset, tmp_
     assert plain_steps < 10000 and paced_steps < 10000     # both stopped by the clock
     assert plain_at == plain_steps                           # without pacing the schedule is where the steps are
     assert paced_at >= 9000                                  # paced: it ran (nearly) to its end in the time
+
+
+@pytest.mark.slow
+def test_exported_graph_records_the_data_seed_not_the_training_seed(synthetic_dataset, tmp_path, monkeypatch):
+    import dataclasses
+
+    from spacepose.export.metadata import COMMIT_ENV
+    from spacepose.export.onnx_stereo import export_checkpoint
+    from spacepose.onnx_session import read_metadata
+
+    data = tmp_path / "data"
+    shutil.copytree(synthetic_dataset, data)
+    (data / "dataset.json").write_text(json.dumps({"seed": 42, "count": 10, "size": [64, 48]}))
+    monkeypatch.setenv(COMMIT_ENV, "c0ffee")       # what device_job --commit sets for its processes
+    train_stereo(dataclasses.replace(_cfg(data, tmp_path / "run", 1), seed=7))
+    ckpt_path = tmp_path / "run" / "last.pt"
+    meta = export_checkpoint(ckpt_path, tmp_path / "a.onnx", iters=1, size=(64, 64), parity=False)["metadata"]
+    assert meta["dataset"]["seed"] == 42 and meta["dataset"]["size"] == 10 and "training_seed" not in meta["dataset"]
+    assert meta["training_commit"] == "c0ffee" == read_metadata(tmp_path / "a.onnx")["training_commit"]
+    old = load_checkpoint(ckpt_path)    # a checkpoint from before the data seed was recorded
+    del old["dataset"]["seed"]
+    torch.save(old, tmp_path / "old.pt")
+    meta = export_checkpoint(tmp_path / "old.pt", tmp_path / "b.onnx", iters=1, size=(64, 64), parity=False)["metadata"]
+    assert "seed" not in meta["dataset"] and meta["dataset"]["training_seed"] == 7
