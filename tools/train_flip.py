@@ -50,6 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ckpt-every", type=int, default=200)
     parser.add_argument("--val-every", type=int, default=500)
     parser.add_argument("--time-limit-s", type=float, default=0.0, help="stop (after a checkpoint) past this wall time")
+    parser.add_argument("--stop-step", type=int, default=0,
+                        help="stop (after a checkpoint) at this step; the learning rate still follows --steps "
+                             "(a reproducible form of a run that a time limit stopped)")
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--init", type=Path, default=None, help="start from this train-flip checkpoint's weights")
     parser.add_argument("--neither-prob", type=float, default=0.0,
@@ -139,6 +142,8 @@ def run(args: argparse.Namespace) -> int:
         raise SpaceposeError("the bundle has no silhouette samples to draw outlines with")
     if not 0.0 <= args.neither_prob < 1.0:
         raise SpaceposeError(f"--neither-prob must be in [0, 1), got {args.neither_prob}")
+    if args.stop_step < 0:
+        raise SpaceposeError(f"--stop-step must be >= 0 (0: none), got {args.stop_step}")
     train = _samples(out / "train_samples.npz", args.dataset, bundle, split="train", per_frame=args.per_frame,
                      seed=args.seed, size=args.size, limit=None, neither_prob=args.neither_prob)
     val = _samples(out / "val_samples.npz", args.val, bundle, split=None, per_frame=1, seed=args.seed + 1,
@@ -170,8 +175,9 @@ def run(args: argparse.Namespace) -> int:
                      "train_config": {k: str(v) for k, v in vars(args).items() if not k.startswith("_")},
                      "samples": n}, ckpt_path)
 
+    last = min(args.steps, args.stop_step) if args.stop_step > 0 else args.steps
     model.train()
-    while step < args.steps:
+    while step < last:
         rng = np.random.default_rng([args.seed, step])
         idx = rng.integers(0, n, size=args.batch)
         views = augment_views(train["views"][idx], rng)
@@ -192,15 +198,17 @@ def run(args: argparse.Namespace) -> int:
                             "elapsed_s": time.perf_counter() - t_start})
             log.info("step %d loss %.4f", step, np.mean(running))
             running = []
-        if step % args.val_every == 0 or step == args.steps:
+        if step % args.val_every == 0 or step == last:
             metrics = evaluate(model, val["views"], val["labels"], val["regime"])
             log_file.write({"step": step, "val": metrics})
             log.info("step %d val %s", step, metrics["all"])
         timed_out = args.time_limit_s > 0 and time.perf_counter() - t_start > args.time_limit_s
-        if step % args.ckpt_every == 0 or step == args.steps or timed_out:
+        if step % args.ckpt_every == 0 or step == last or timed_out:
             save()
         if timed_out:
             log.warning("time limit reached at step %d", step)
             break
+    if step == last < args.steps:
+        log.info("stopped at --stop-step %d of %d (resume with --resume)", step, args.steps)
     log_file.close()
     return 0

@@ -180,6 +180,30 @@ def test_train_resume_and_export(synthetic_dataset, plate_bundle, tmp_path):
     np.testing.assert_allclose(session.run(["logit"], {"views": swapped})[0], -got, atol=1e-5)
 
 
+def test_a_stopped_and_resumed_run_is_the_uninterrupted_run(synthetic_dataset, plate_bundle, tmp_path):
+    def args(out):
+        return ["train-flip", str(synthetic_dataset), "--val", str(synthetic_dataset), "--out", str(out), "--bundle",
+                str(plate_bundle), "--size", "32", "--batch", "4", "--per-frame", "2", "--val-frames", "4",
+                "--ckpt-every", "100", "--val-every", "100", "--steps", "6"]
+
+    assert main(args(tmp_path / "whole")) == 0
+    assert main(args(tmp_path / "parts") + ["--stop-step", "4"]) == 0
+    stopped = torch.load(tmp_path / "parts" / "last.pt", weights_only=False)
+    assert stopped["step"] == 4
+    log = [json.loads(line) for line in (tmp_path / "parts" / "log.jsonl").read_text().splitlines()]
+    assert [e["step"] for e in log if "val" in e] == [4]          # the stopped checkpoint is validated
+    assert main(args(tmp_path / "parts") + ["--resume"]) == 0
+    whole = torch.load(tmp_path / "whole" / "last.pt", weights_only=False)
+    parts = torch.load(tmp_path / "parts" / "last.pt", weights_only=False)
+    assert parts["step"] == whole["step"] == 6
+    assert parts["scheduler"]["last_epoch"] == whole["scheduler"]["last_epoch"]
+    for name, value in whole["model"].items():
+        torch.testing.assert_close(parts["model"][name], value, rtol=0, atol=1e-6)
+    different = [n for n, v in stopped["model"].items() if v.is_floating_point() and not torch.equal(v, whole["model"][n])]
+    assert different                                              # steps 5 and 6 did move the weights
+    assert main(args(tmp_path / "bad") + ["--stop-step", "-1"]) == 2
+
+
 def test_export_refuses_a_checkpoint_of_another_kind(tmp_path):
     torch.save({"kind": "pose"}, tmp_path / "x.pt")
     assert main(["export-flip", str(tmp_path / "x.pt"), "--out", str(tmp_path / "flip.onnx")]) == 2
