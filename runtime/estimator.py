@@ -579,7 +579,7 @@ class PoseEstimator:
             if flip_p <= fc.veto_prob and (outline.decided(sil) or conclusive):
                 return _stage_invalid(stage, "weak_votes", factors), (
                     f"the flip classifier gives the decided pose {flip_p:.2f} against its flip")
-        learned = self._learned_choice(outline, flip_p)
+        learned = self._learned_choice(outline, flip_p, reg.tau_m)
         if outline is not None and outline.decided(sil):
             if conclusive and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:
                 return _stage_invalid(stage, "weak_votes", factors), (
@@ -724,16 +724,20 @@ class PoseEstimator:
             timer.add_network((time.perf_counter() - t_net) * 1e3)
         return p
 
-    def _learned_choice(self, outline: Any, flip_p: float | None) -> tuple[np.ndarray, np.ndarray] | None:
+    def _learned_choice(self, outline: Any, flip_p: float | None,
+                        tau_m: float = float("nan")) -> tuple[np.ndarray, np.ndarray] | None:
         """The pose the flip classifier decides on a frame (``None`` when it does not): the outline's
         winner when it gives it at least ``decide_prob``, the outline's rival when it gives the winner
         at most ``1 - decide_prob`` and that rival is the winner's flip (within 20°, refined); either
         only when the pose fits the outline within ``max_chamfer_px``, the outline margin is at least
-        ``min_margin_px``, the outlines differ in enough pixels and a usable image vote does not
-        back the other one."""
+        ``min_margin_px``, the outlines differ in enough pixels, a usable image vote does not
+        back the other one and the registration's depth tolerance ``tau_m`` is at most
+        ``max_depth_tolerance_m`` (when set; NaN refuses)."""
         if flip_p is None:
             return None
         fc, sil = self.bundle.flip_classifier, self.bundle.silhouette
+        if fc.max_depth_tolerance_m > 0.0 and not tau_m <= fc.max_depth_tolerance_m:
+            return None
         if outline.too_few_flip_pixels(sil) or outline.margin_px < fc.min_margin_px:
             return None
         vote = outline.vote if sil.image_vote and outline.vote is not None and outline.vote.usable else None

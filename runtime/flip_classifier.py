@@ -9,7 +9,8 @@ two poses, and returns the probability that the first is the right one. The esti
 * to **veto**: a pose the outline or the stereo points decided, which the classifier gives at most
   ``veto_prob``, is reported ``weak_votes``;
 * to **decide**: a frame the outline leaves undecided, whose winner fits the outline within
-  ``max_chamfer_px``, is decided for the pose the classifier gives at least ``decide_prob``.
+  ``max_chamfer_px`` and whose stereo depth tolerance is at most ``max_depth_tolerance_m``, is decided for
+  the pose the classifier gives at least ``decide_prob``.
 
 Both thresholds are chosen on training frames (``bundle.json``), never by the exporter.
 """
@@ -45,6 +46,9 @@ class FlipClassifierConfig:
         than this (degrees), or when the polish does not run or is not used; 0: no such check. On the
         calibration frames of session 18, the classifier-decided poses that were wrong were ones the
         polish moved far (the model card, "The flip classifier").
+    max_depth_tolerance_m: a frame it decides must have a registration depth tolerance (``tau``, metres:
+        :class:`spacepose.registration.RegistrationResult`) of at most this; 0: no such check. Far frames
+        have coarse stereo depth: on session 21's check sets the poses it added that were wrong were there.
     """
 
     file: str = "flip.onnx"
@@ -55,6 +59,7 @@ class FlipClassifierConfig:
     max_chamfer_px: float = 2.0
     min_margin_px: float = 0.0
     max_polish_deg: float = 0.0
+    max_depth_tolerance_m: float = 0.0
 
     def __post_init__(self) -> None:
         if self.size < 16:
@@ -64,8 +69,9 @@ class FlipClassifierConfig:
         if self.decide_prob <= 0.5 or self.veto_prob >= 0.5:
             raise ValueError(f"flip_classifier: decide_prob must be > 0.5 and veto_prob < 0.5, "
                              f"got {self.decide_prob}, {self.veto_prob}")
-        if self.max_chamfer_px < 0 or self.min_margin_px < 0 or self.max_polish_deg < 0:
-            raise ValueError("flip_classifier: max_chamfer_px, min_margin_px and max_polish_deg must be >= 0")
+        if min(self.max_chamfer_px, self.min_margin_px, self.max_polish_deg, self.max_depth_tolerance_m) < 0:
+            raise ValueError("flip_classifier: max_chamfer_px, min_margin_px, max_polish_deg and "
+                             "max_depth_tolerance_m must be >= 0")
 
 
 def parse_flip_classifier(section: Any) -> FlipClassifierConfig | None:

@@ -244,11 +244,36 @@ def test_a_classifier_decision_the_polish_turns_far_is_refused(tmp_path, monkeyp
         assert res.status == "weak_votes" and "polish" in res.detail
 
 
+def test_a_classifier_decision_on_coarse_depth_is_refused(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+
+    left, right = synthetic_pair()
+    results = {}
+    for name, scale in (("open", 0.0), ("above", 1.05), ("below", 0.95)):
+        cap = 0.0 if not scale else scale * results["open"].depth_tolerance_m
+        est = _flip_estimator(tmp_path / name, monkeypatch, 0.95, max_depth_tolerance_m=cap)
+        assert est.bundle.flip_classifier.max_depth_tolerance_m == cap
+        monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}))
+        monkeypatch.setattr(estimator_module, "polish_pose", lambda *a, **k: None)
+        results[name] = est.estimate(left, right)
+    tau = results["open"].depth_tolerance_m
+    assert np.isfinite(tau) and tau > 0.0
+    assert results["open"].valid and results["open"].decided_by == "classifier"
+    assert results["above"].valid and results["above"].decided_by == "classifier"
+    np.testing.assert_allclose(results["above"].R, results["open"].R)
+    below = results["below"]
+    assert not below.valid and below.status == "weak_votes" and below.decided_by == ""
+    assert below.depth_tolerance_m == pytest.approx(tau) and below.flip_prob == 0.95
+
+
 def test_bundle_refuses_a_negative_polish_cap():
     from spacepose.flip_classifier import parse_flip_classifier
 
     with pytest.raises(BundleError, match="max_polish_deg"):
         parse_flip_classifier({"max_polish_deg": -1.0})
+    with pytest.raises(BundleError, match="max_depth_tolerance_m"):
+        parse_flip_classifier({"max_depth_tolerance_m": -0.5})
 
 
 def test_without_a_classifier_nothing_changes(tmp_path, monkeypatch):
