@@ -534,7 +534,7 @@ def _parse_silhouette(section: Any, n_points: int, has_registration: bool) -> Si
     values = _config_fields(SilhouetteConfig, section, "silhouette",
                             zero_ints=("seed", "iterations", "stereo_points", "reverse", "image_vote",
                                        "image_exclusion_px", "image_min_pixels", "min_flip_pixels", "polish",
-                                       "search_candidates"),
+                                       "track_needs_outline", "search_candidates"),
                             zero_numbers=("depth_margin_m", "min_margin_px", "range_weight", "image_min_score",
                                           "image_min_margin_px", "image_max_background", "image_veto_score",
                                           "image_max_chamfer_px", "polish_range_weight", "search_separation_deg",

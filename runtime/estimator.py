@@ -521,7 +521,10 @@ class PoseEstimator:
            ``0.5 * inlier_fraction``. The outline-refined poses that fit within ``max_chamfer_px``
            are asked first (they are the more accurate, so they stay within the gates longer); when
            exactly one of them is near, it is reported, with the registered candidate near the
-           previous pose (if any) to fall back to when the checks after refuse it.
+           previous pose (if any) to fall back to when the checks after refuse it. With the silhouette
+           stage's ``track_needs_outline`` only such a refined pose is reported (no registered one,
+           no fallback). A flip-classifier decision the polish cap refuses
+           (``flip_classifier.max_polish_deg``) is left to this route too.
 
         Otherwise the frame is ``weak_votes``. A pose decided by 1 or 2 that is more than 90° from
         the prior is reported ``weak_votes`` too (one of the two is a flip, and the frame alone
@@ -609,27 +612,10 @@ class PoseEstimator:
             factors["flip_decided"] = 1.0
             factors["route"] = _route_code("classifier")
         else:
-            tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
-            refined = []
-            if prior is not None and outline is not None:  # the outline-refined poses fit the tracking gates best
-                refined = [(fit.R, fit.t) for fit in (outline.best, outline.other)
-                           if fit.chamfer_px <= sil.max_chamfer_px and near_prior(fit.R, fit.t, prior[0], prior[1], config)]
-            if tracked is None and len(refined) != 1:
-                why = (f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
-                       f"(score gap {margin:.4f} < {config.min_margin:.4f})" if margin < config.min_margin else
-                       f"the stereo depth (tolerance {reg.tau_m:.2f} m > {config.max_tau_m:.2f} m) is too coarse "
-                       "to tell the pose from its flip")
-                if outline is not None:
-                    vote = ("" if outline.vote is None else
-                            f", image vote {outline.vote.score:+.2f} on {outline.vote.pixels} px")
-                    why += (f"; the outline does not decide (chamfer {outline.best.chamfer_px:.2f} px, "
-                            f"margin {outline.margin_px:.2f} px{vote})")
-                return _stage_invalid(stage, "weak_votes", factors), (
-                    why + ("" if prior is None else "; the previous pose does not pick one"))
-            if len(refined) == 1:  # the refined pose near the previous one; the registered one if the checks refuse it
-                (R, t), fallback = refined[0], tracked
-            else:
-                R, t = tracked
+            track = self._track(reg, prior, outline, margin)
+            if isinstance(track, str):
+                return _stage_invalid(stage, "weak_votes", factors), track
+            (R, t), fallback = track
             confidence = 0.5 * reg.inlier_fraction
             factors["tracked"] = 1.0
             factors["route"] = _route_code("tracked")
@@ -638,26 +624,78 @@ class PoseEstimator:
             # wrong and nothing says which; report neither, and the next frame starts without a prior
             return _stage_invalid(stage, "weak_votes", {**factors, "prior_conflict": 1.0}), (
                 f"the pose is {turned:.0f}° from the previous valid pose")
-        decided = None
-        if outline is not None and sil.polish:
-            with timer.stage("silhouette"):
-                polished = polish_pose(outline, R, t, self._outline_points, sil, stereo_points=xyz,
-                                       surface=self._registration, tau_m=reg.tau_m)
-            if polished is not None:
-                factors.update(polish_deg=float(rotation_angle_deg(R, polished.R)),
-                               polish_m=float(np.linalg.norm(polished.t - np.asarray(t))))
-                decided, (R, t) = (R, t), (polished.R, polished.t)
+        decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer)
         if factors.get("flip_decided") and (cap := bundle.flip_classifier.max_polish_deg) > 0.0:
             moved = factors.get("polish_deg", float("nan")) if decided is not None else float("nan")
             if not moved <= cap:   # NaN (no polish, or one not used) refuses too
-                return _stage_invalid(stage, "weak_votes", factors), (
-                    f"the flip classifier decided the pose, but the polish turned it {moved:.1f}° "
-                    f"(more than {cap:.1f}°, or it did not run)")
+                refusal = (f"the flip classifier decided the pose, but the polish turned it {moved:.1f}° "
+                           f"(more than {cap:.1f}°, or it did not run)")
+                # a refused decision is no decision: the previous pose may still pick one, as without the classifier
+                track = self._track(reg, prior, outline, margin) if prior is not None else ""
+                if isinstance(track, str):
+                    return _stage_invalid(stage, "weak_votes", factors), refusal + (f"; {track}" if track else "")
+                for key in ("flip_decided", "polish_deg", "polish_m"):
+                    factors.pop(key, None)
+                (R, t), fallback = track
+                confidence = 0.5 * reg.inlier_fraction
+                factors.update(tracked=1.0, route=_route_code("tracked"), classifier_refused=1.0)
+                decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer)
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),
                                    bandwidth=bandwidth, n_inliers=n_inliers, factors={**stage.factors, **factors},
                                    fallback=fallback, decided=decided), ""
+
+    def _track(self, reg: Any, prior: tuple[np.ndarray, np.ndarray] | None, outline: Any,
+               margin: float) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray] | None] | str:
+        """The pose the previous one picks (route 3 of :meth:`_register`): ``((R, t), fallback)``, or why
+        it picks none. The outline-refined fits within ``max_chamfer_px`` are asked first; when exactly
+        one is near the prior it is the pose, with the registered candidate near the prior (if any) to
+        fall back on. Else the registered candidate near the prior, unless the silhouette stage's
+        ``track_needs_outline`` asks for an outline fit (then no fallback either)."""
+        config, sil = self.bundle.registration, self.bundle.silhouette
+        tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
+        refined = []
+        if prior is not None and outline is not None:  # the outline-refined poses fit the tracking gates best
+            refined = [(fit.R, fit.t) for fit in (outline.best, outline.other)
+                       if fit.chamfer_px <= sil.max_chamfer_px and near_prior(fit.R, fit.t, prior[0], prior[1], config)]
+        needs_outline = outline is not None and bool(sil.track_needs_outline)
+        if needs_outline:
+            tracked = None
+        if tracked is None and len(refined) != 1:
+            why = (f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
+                   f"(score gap {margin:.4f} < {config.min_margin:.4f})" if margin < config.min_margin else
+                   f"the stereo depth (tolerance {reg.tau_m:.2f} m > {config.max_tau_m:.2f} m) is too coarse "
+                   "to tell the pose from its flip")
+            if outline is not None:
+                vote = ("" if outline.vote is None else
+                        f", image vote {outline.vote.score:+.2f} on {outline.vote.pixels} px")
+                why += (f"; the outline does not decide (chamfer {outline.best.chamfer_px:.2f} px, "
+                        f"margin {outline.margin_px:.2f} px{vote})")
+            if prior is not None:
+                why += ("; no outline fit within the chamfer gate is near the previous pose" if needs_outline else
+                        "; the previous pose does not pick one")
+            return why
+        if len(refined) == 1:  # the refined pose near the previous one; the registered one if the checks refuse it
+            return refined[0], tracked
+        return tracked, None
+
+    def _polish(self, outline: Any, R: np.ndarray, t: np.ndarray, xyz: np.ndarray, reg: Any, factors: dict,
+                timer: StageTimer) -> tuple[tuple[np.ndarray, np.ndarray] | None, np.ndarray, np.ndarray]:
+        """``(decided, R, t)``: with the silhouette stage's ``polish``, the pose refined once more against
+        the outline (``decided`` the pose before it; ``polish_deg`` and ``polish_m`` added to
+        ``factors``), else ``(None, R, t)``."""
+        sil = self.bundle.silhouette
+        if outline is None or not sil.polish:
+            return None, R, t
+        with timer.stage("silhouette"):
+            polished = polish_pose(outline, R, t, self._outline_points, sil, stereo_points=xyz,
+                                   surface=self._registration, tau_m=reg.tau_m)
+        if polished is None:
+            return None, R, t
+        factors.update(polish_deg=float(rotation_angle_deg(R, polished.R)),
+                       polish_m=float(np.linalg.norm(polished.t - np.asarray(t))))
+        return (R, t), polished.R, polished.t
 
     def _verify(self, stage: PoseStageResult, xyz: np.ndarray, left_r: np.ndarray, right_r: np.ndarray,
                 timer: StageTimer, fitness: float | None) -> tuple[str, str] | None:

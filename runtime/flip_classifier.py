@@ -43,7 +43,8 @@ class FlipClassifierConfig:
         vetoes). max_chamfer_px: the outline fit (outline px) a pose it decides must reach.
     min_margin_px: the least outline margin of a frame it decides (0: any).
     max_polish_deg: a pose it decides is refused when the silhouette stage's polish turns it by more
-        than this (degrees), or when the polish does not run or is not used; 0: no such check. On the
+        than this (degrees), or when the polish does not run or is not used (the previous pose may then
+        decide the frame, as without the classifier); 0: no such check. On the
         calibration frames of session 18, the classifier-decided poses that were wrong were ones the
         polish moved far (the model card, "The flip classifier").
     max_depth_tolerance_m: a frame it decides must have a registration depth tolerance (``tau``, metres:

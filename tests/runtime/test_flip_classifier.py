@@ -244,6 +244,33 @@ def test_a_classifier_decision_the_polish_turns_far_is_refused(tmp_path, monkeyp
         assert res.status == "weak_votes" and "polish" in res.detail
 
 
+def test_a_refused_classifier_decision_leaves_the_frame_to_the_previous_pose(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.registration import exp_so3, rotation_angle_deg
+    from spacepose.silhouette import OutlineFit
+
+    left, right = synthetic_pair()
+    est = _flip_estimator(tmp_path, monkeypatch, 0.95, silhouette={"polish": 1}, max_polish_deg=2.0)
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}))
+    turn = {"deg": 1.0}
+
+    def polish(outline, R, t, *args, **kwargs):
+        return OutlineFit(exp_so3(np.array([np.radians(turn["deg"]), 0.0, 0.0])) @ R, np.asarray(t), 0.5)
+
+    monkeypatch.setattr(estimator_module, "polish_pose", polish)
+    est._roi_hint = lambda: None
+    first = est.estimate(left, right)
+    assert first.valid and first.decided_by == "classifier" and not first.tracked
+    turn["deg"] = 3.0                      # the cap refuses the classifier's pose ...
+    res = est.estimate(left, right)        # ... and the previous pose picks it instead
+    assert res.valid and res.tracked and res.decided_by == "tracked", res.detail
+    assert rotation_angle_deg(res.R, first.R) < 5.0 and abs(res.polish_deg - 3.0) < 1e-6
+    est.reset()                            # without a previous pose the refusal stands
+    res = est.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes" and "polish" in res.detail
+
+
 def test_a_classifier_decision_on_coarse_depth_is_refused(tmp_path, monkeypatch):
     import spacepose.estimator as estimator_module
     from _bundle_fixtures import synthetic_pair

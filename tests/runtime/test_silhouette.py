@@ -511,6 +511,57 @@ def test_a_tracked_frame_reports_the_outline_refined_pose_and_falls_back_when_it
     assert rotation_angle_deg(res.R, first.R) < 20.0
 
 
+@pytest.mark.parametrize("needs_outline", [0, 1])
+def test_track_needs_outline_refuses_a_tracked_pose_no_outline_fit_confirms(tmp_path, monkeypatch, needs_outline):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.silhouette import OutlineDecision, OutlineFit
+
+    left, right = synthetic_pair()
+    first = _estimator(tmp_path / "l", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0}
+                       ).estimate(left, right)
+    assert first.valid
+    gates = {"max_chamfer_px": 1.0, "min_margin_px": 5.0, "track_needs_outline": needs_outline}
+    est = _estimator(tmp_path / "t", {"min_margin": 0.99}, gates)
+    assert est.bundle.silhouette.track_needs_outline == needs_outline
+    est._roi_hint = lambda: None
+    nudged = Rotation.from_euler("x", 2.0, degrees=True).as_matrix() @ first.R
+    far = flipped_pose(first.R, first.t, est.bundle.centre, "z")
+    fits = {"near": 3.0}      # the fit near the prior: outside the 1 px gate, then inside it
+
+    def refined(candidates, *args, **kwargs):
+        return OutlineDecision(best=OutlineFit(far[0], far[1], 0.8), other=OutlineFit(nudged, first.t, fits["near"]),
+                               best_index=0, margin_px=0.1, turned_deg=178.0)
+
+    monkeypatch.setattr(estimator_module, "decide_outline", refined)
+    est._prior = first
+    res = est.estimate(left, right)
+    if needs_outline:   # no outline fit near the prior within the gate: the registered pose alone is not enough
+        assert not res.valid and res.status == "weak_votes" and "near the previous pose" in res.detail
+    else:               # the registered pose near the prior is reported
+        assert res.valid and res.tracked and rotation_angle_deg(res.R, first.R) < 20.0
+        assert rotation_angle_deg(res.R, nudged) > 0.1
+    fits["near"] = 0.9
+    est._prior = first
+    res = est.estimate(left, right)
+    assert res.valid and res.tracked and rotation_angle_deg(res.R, nudged) < 1e-9
+    # the checks refuse the refined pose: the registered one is the fallback only without the flag
+    original = est._verify
+    monkeypatch.setattr(est, "_verify", lambda stage, *a: ("fit_residual", "stub") if
+                        rotation_angle_deg(stage.R, nudged) < 1e-9 else original(stage, *a))
+    est._prior = first
+    res = est.estimate(left, right)
+    assert res.valid != bool(needs_outline)
+    if not needs_outline:
+        assert res.tracked and rotation_angle_deg(res.R, nudged) > 0.1
+
+
+def test_track_needs_outline_is_a_flag():
+    with pytest.raises(ValueError):
+        SilhouetteConfig(track_needs_outline=2)
+    assert SilhouetteConfig().track_needs_outline == 0
+
+
 def test_points_behind_the_camera_or_a_nan_pose_splat_nothing(plate):
     pts, _ = plate
     frame = silhouette_frame(K, 160, 80, 320, 192)
