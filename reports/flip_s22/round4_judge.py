@@ -2,6 +2,11 @@
 
     python reports/flip_s22/round4_judge.py RUNS OLD_S [X]
 
+From a fresh clone: ``mkdir -p /tmp/r4/r2 /tmp/old && tar xzf reports/flip_s22/sequences_rounds2to4.tar.gz -C /tmp/r4/r2
+&& tar xzf reports/flip_s21/sequences.tar.gz -C /tmp/old && tar xzf reports/flip_s22/sequences_e_round1.tar.gz -C
+/tmp/old && python reports/flip_s22/round4_judge.py /tmp/r4/r2 /tmp/old``: the single-frame reports missing under
+RUNS are read from their gzipped copies beside this script.
+
 RUNS: the run folder of rounds 2-4 (``seq/NAME_{S,C}.json`` from ``sequence eval``; ``{val8a,val8b,v1280c,val9a,
 val9b,v1280d}_{S,Cp}/pose_eval.json`` from ``eval-pose``: on independent frames C = C'). ROUND1: round 1's runs
 (``val7_{default,cand}.json``, ``v1280b_{default,cand}/pose_eval.json``) are read from RUNS/.. . OLD_S: as in
@@ -21,7 +26,14 @@ OLD += [f"c{i}" for i in range(1, 11)] + [f"d{i}" for i in range(1, 11)]
 E, F, G = ([f"{p}{i}" for i in range(1, n + 1)] for p, n in (("e", 10), ("f", 20), ("g", 20)))
 
 
+REPORTS = Path(__file__).resolve().parent
+
+
 def rows(path):
+    path = Path(path)
+    if not path.exists():   # a fresh clone: the committed copy (reports/flip_s22/NAME.json.gz)
+        name = path.parent.name if path.name == "pose_eval.json" else path.stem
+        path = REPORTS / f"{name}.json.gz"
     path = str(path)
     with (gzip.open(path, "rt") if path.endswith(".gz") else open(path)) as fh:
         return json.load(fh)["frames"]
