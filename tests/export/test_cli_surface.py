@@ -24,9 +24,16 @@ def bundle_copy(tmp_path):
     folder.mkdir()
     for name in ("bundle.json", "MODEL_CARD.md"):
         shutil.copyfile(DEFAULT / name, folder / name)
-    for name in ("stereo.onnx", "pose.onnx"):  # graphs are only read for their metadata: link, don't copy
+    for name in ("stereo.onnx", "pose.onnx", "flip.onnx"):  # graphs are only read for their metadata: link, don't copy
         (folder / name).symlink_to(DEFAULT / name)
     return folder
+
+
+def _drop_flip_classifier(folder: Path) -> None:
+    """The bundle without its flip classifier section (which needs the silhouette stage)."""
+    data = json.loads((folder / "bundle.json").read_text())
+    data.pop("flip_classifier", None)
+    (folder / "bundle.json").write_text(json.dumps(data, indent=1))
 
 
 def test_writes_samples_on_the_mesh_with_unit_normals(bundle_copy):
@@ -54,6 +61,11 @@ def test_writes_samples_on_the_mesh_with_unit_normals(bundle_copy):
     assert after["stereo"] == before["stereo"] and after["pose"] == before["pose"]
     # the silhouette stage decides between registered poses: it cannot stay without the registration
     assert main(["export-surface", str(bundle_copy), "--count", "500", "--no-registration"]) == 2
+    # ... nor the shipped flip classifier without the silhouette stage: refused, the bundle kept as it was
+    text = (bundle_copy / "bundle.json").read_text()
+    assert main(["export-surface", str(bundle_copy), "--count", "500", "--no-registration", "--no-silhouette"]) == 2
+    assert (bundle_copy / "bundle.json").read_text() == text
+    _drop_flip_classifier(bundle_copy)
     assert main(["export-surface", str(bundle_copy), "--count", "500", "--no-registration", "--no-silhouette"]) == 0
     assert load_bundle(bundle_copy).registration is None
 
@@ -96,6 +108,8 @@ def test_writes_outline_samples_and_the_silhouette_section(bundle_copy):
     # a later call that does not name them keeps the samples and the section
     assert main(["export-surface", str(bundle_copy), "--count", "300"]) == 0
     assert load_bundle(bundle_copy).silhouette_points.shape == (2000, 3)
+    assert main(["export-surface", str(bundle_copy), "--count", "300", "--no-silhouette"]) == 2  # the classifier needs it
+    _drop_flip_classifier(bundle_copy)
     assert main(["export-surface", str(bundle_copy), "--count", "300", "--no-silhouette"]) == 0
     b = load_bundle(bundle_copy)
     assert b.silhouette is None and b.silhouette_points.shape == (0, 3)
