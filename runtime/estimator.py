@@ -638,7 +638,7 @@ class PoseEstimator:
                     factors.pop(key, None)
                 (R, t), fallback = track
                 confidence = 0.5 * reg.inlier_fraction
-                factors.update(tracked=1.0, route=_route_code("tracked"), classifier_refused=1.0)
+                factors.update(tracked=1.0, route=_route_code("tracked"))
                 decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer)
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
