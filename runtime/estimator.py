@@ -654,14 +654,13 @@ class PoseEstimator:
         fall back on. Else the registered candidate near the prior, unless the silhouette stage's
         ``track_needs_outline`` asks for an outline fit (then no fallback either)."""
         config, sil = self.bundle.registration, self.bundle.silhouette
-        tracked = select_with_prior(reg, prior[0], prior[1], config) if prior is not None else None
+        needs_outline = outline is not None and bool(sil.track_needs_outline)
+        tracked = (select_with_prior(reg, prior[0], prior[1], config)
+                   if prior is not None and not needs_outline else None)
         refined = []
         if prior is not None and outline is not None:  # the outline-refined poses fit the tracking gates best
             refined = [(fit.R, fit.t) for fit in (outline.best, outline.other)
                        if fit.chamfer_px <= sil.max_chamfer_px and near_prior(fit.R, fit.t, prior[0], prior[1], config)]
-        needs_outline = outline is not None and bool(sil.track_needs_outline)
-        if needs_outline:
-            tracked = None
         if tracked is None and len(refined) != 1:
             why = (f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
                    f"(score gap {margin:.4f} < {config.min_margin:.4f})" if margin < config.min_margin else
@@ -763,7 +762,7 @@ class PoseEstimator:
         return p
 
     def _learned_choice(self, outline: Any, flip_p: float | None,
-                        tau_m: float = float("nan")) -> tuple[np.ndarray, np.ndarray] | None:
+                        tau_m: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The pose the flip classifier decides on a frame (``None`` when it does not): the outline's
         winner when it gives it at least ``decide_prob``, the outline's rival when it gives the winner
         at most ``1 - decide_prob`` and that rival is the winner's flip (within 20°, refined); either
