@@ -80,6 +80,7 @@ from .errors import BundleError
 from .flip_classifier import FlipClassifierConfig, parse_flip_classifier
 from .pose_inputs import PoseInputSpec
 from .registration import RegistrationConfig
+from .roi import WINDOW_DISPARITY_FILL
 from .silhouette import SilhouetteConfig
 
 __all__ = [
@@ -314,7 +315,9 @@ def expected_disparity_px(bundle: ModelBundle, focal_px: float, baseline_m: floa
     * coarse: d = f B / Z times the letterbox scale ``min(w_in / W, h_in / H)``;
     * fine: the ROI window's side is ``margin * (target width + d)`` so the window disparity,
       ``w_in * B / (margin * (width_m + B))``, does not depend on Z or f; the target's width in
-      metres lies between its smallest bounding-box extent and its bounding-sphere diameter.
+      metres lies between its smallest bounding-box extent and its bounding-sphere diameter. The
+      window is widened where that would exceed ``WINDOW_DISPARITY_FILL * max_disp``
+      (:func:`spacepose.roi.square_window`), so neither end goes above that cap.
     """
     near, far = bundle.distance_range_m
     w_in, h_in = bundle.stereo.input_size
@@ -322,8 +325,9 @@ def expected_disparity_px(bundle: ModelBundle, focal_px: float, baseline_m: floa
     coarse = (focal_px * baseline_m / far * s, focal_px * baseline_m / near * s)
     margin = bundle.stereo.window_margin
     smallest = float(np.min(bundle.bbox_max - bundle.bbox_min))
-    fine = (w_in * baseline_m / (margin * (2.0 * bundle.radius + baseline_m)),
-            w_in * baseline_m / (margin * (smallest + baseline_m)))
+    cap = WINDOW_DISPARITY_FILL * bundle.stereo.max_disp
+    fine = (min(w_in * baseline_m / (margin * (2.0 * bundle.radius + baseline_m)), cap),
+            min(w_in * baseline_m / (margin * (smallest + baseline_m)), cap))
     return {"coarse": coarse, "fine": fine}
 
 

@@ -43,9 +43,15 @@ __all__ = [
     "bbox_from_mask",
     "bbox_from_disparity",
     "disparity_range",
+    "WINDOW_DISPARITY_FILL",
 ]
 
 BBox = tuple[int, int, int, int]
+
+#: a fine-pass window is at least wide enough that the target's largest disparity maps to this share
+#: of the graph's ``max_disp`` (:func:`square_window`); so a rig with a long baseline still gives the
+#: graph disparities it can output, at a coarser window
+WINDOW_DISPARITY_FILL = 0.9
 
 
 @dataclass(frozen=True)
@@ -145,7 +151,7 @@ def square_window(
         center_jitter: shift of the window centre, in units of the side (training only).
         min_side: smallest side in pixels (limits the upsampling of far, small targets).
         out_side, max_disp: when both are given the side is enlarged so that ``d_max`` maps below
-            ``0.9 * max_disp`` net pixels (the graph cannot output more than ``max_disp``).
+            ``WINDOW_DISPARITY_FILL * max_disp`` net pixels (the graph cannot output more than ``max_disp``).
     """
     x0, y0, x1, y1 = (float(b) for b in bbox)
     if not (x1 > x0 and y1 > y0):
@@ -159,7 +165,7 @@ def square_window(
     side = max(ux1 - ux0, uy1 - uy0) * margin
     side = max(side, float(min_side))
     if out_side is not None and max_disp is not None and d_max > 0:
-        side = max(side, d_max * out_side / (0.9 * max_disp))
+        side = max(side, d_max * out_side / (WINDOW_DISPARITY_FILL * max_disp))
     side_i = int(math.ceil(side))
     cx = 0.5 * (ux0 + ux1) + center_jitter[0] * side_i
     cy = 0.5 * (uy0 + uy1) + center_jitter[1] * side_i

@@ -58,6 +58,27 @@ class TestLoad:
         with pytest.raises(BundleError, match="coarse"):  # a fifth of it: the target would vanish at 50 m
             b.check_fits(StereoRig(base.M1, base.D1, base.M2, base.D2, base.R, base.T / 5.0, base.image_size))
 
+    def test_a_long_baseline_fits_through_a_wider_fine_window(self):
+        """B = 2 m at 800x600, f = 1000 px (session 23's rig B): the fine window's disparity would reach
+        122 px at the target's narrowest, but the window widens to keep it at 0.9 max_disp (roi), so the
+        rig is not refused; the coarse pass sees 13-64 px, inside the trained range."""
+        from spacepose.bundle import expected_disparity_px
+        from spacepose.roi import WINDOW_DISPARITY_FILL, square_window
+
+        b = load_bundle()
+        K = np.array([[1000.0, 0.0, 399.5], [0.0, 1000.0, 299.5], [0.0, 0.0, 1.0]])
+        rig = StereoRig(K, np.zeros(5), K, np.zeros(5), np.eye(3), np.array([-2.0, 0.0, 0.0]), (800, 600))
+        b.check_fits(rig)
+        cap = WINDOW_DISPARITY_FILL * b.stereo.max_disp
+        fine = expected_disparity_px(b, 1000.0, 2.0, (800, 600))["fine"]
+        assert fine[1] == pytest.approx(cap) and fine[0] < cap
+        # what the cap stands for: the window square_window gives such a target holds its largest
+        # disparity at the cap (target 2.0 m wide at 10 m: 200 px box, disparity 200 px)
+        win = square_window((300, 200, 500, 400), 170.0, 200.0, b.stereo.window_margin,
+                            out_side=b.stereo.input_size[0], max_disp=b.stereo.max_disp)
+        assert 200.0 * b.stereo.input_size[0] / win.side <= cap + 1e-9
+        assert 200.0 * b.stereo.input_size[0] / (b.stereo.window_margin * (200.0 + 200.0)) > cap  # widened
+
     def test_missing_folder(self, tmp_path):
         with pytest.raises(BundleError, match="does not exist"):
             load_bundle(tmp_path / "nope")
