@@ -80,7 +80,7 @@ from .errors import BundleError
 from .flip_classifier import FlipClassifierConfig, parse_flip_classifier
 from .pose_inputs import PoseInputSpec
 from .registration import RegistrationConfig
-from .roi import WINDOW_DISPARITY_FILL
+from .roi import COARSE_TILE_OVERLAP_PX, WINDOW_DISPARITY_FILL
 from .silhouette import SilhouetteConfig
 
 __all__ = [
@@ -96,12 +96,15 @@ __all__ = [
     "expected_disparity_px",
     "DISPARITY_TOLERANCE",
     "COARSE_DETECTION_FLOOR_PX",
+    "MAX_COARSE_TILES",
 ]
 
 logger = logging.getLogger(__name__)
 
 SCHEMA = "spacepose.bundle/1"
 DEFAULT_BUNDLE_DIR = Path(__file__).resolve().parent / "bundles" / "default"
+#: most tiles per side of a tiled coarse pass (:meth:`ModelBundle.coarse_tiles_for`; n**2 graph runs)
+MAX_COARSE_TILES = 3
 #: relative slack on the trained disparity range accepted by :meth:`ModelBundle.check_fits`
 DISPARITY_TOLERANCE = 0.25
 #: smallest coarse-pass disparity (graph input px) at which the target still stands out of the
@@ -267,14 +270,34 @@ class ModelBundle:
         ranges = expected_disparity_px(self, self.rig.focal_px, self.rig.baseline_m, self.rig.image_size)
         return (min(r[0] for r in ranges.values()), max(r[1] for r in ranges.values()))
 
+    def _coarse_problem(self, focal: float, baseline: float, size: tuple[int, int], tiles: int
+                        ) -> tuple[str, tuple[float, float]] | None:
+        lo, hi = self.trained_disparity_px()
+        lo_ok, hi_ok = lo * (1.0 - DISPARITY_TOLERANCE), hi * (1.0 + DISPARITY_TOLERANCE)
+        for name, (d_lo, d_hi) in expected_disparity_px(self, focal, baseline, size, tiles).items():
+            floor = min(lo_ok, COARSE_DETECTION_FLOOR_PX) if name == "coarse" else lo_ok
+            if d_lo < floor or d_hi > hi_ok:
+                return name, (d_lo, d_hi)
+        return None
+
+    def coarse_tiles_for(self, rig: Any) -> int:
+        """How many tiles per side the coarse pass needs under ``rig`` (1: one letterboxed run): the
+        fewest, up to :data:`MAX_COARSE_TILES`, with which :meth:`check_fits` accepts it (1 when none does)."""
+        focal, baseline, size = _rig_numbers(rig)
+        for n in range(1, MAX_COARSE_TILES + 1):
+            if self._coarse_problem(focal, baseline, size, n) is None:
+                return n
+        return 1
+
     def check_fits(self, rig: Any) -> None:
         """Refuse a calibration under which the stereo graph would see disparities it never saw.
 
         For the target anywhere in ``distance_range_m``, the disparity in graph input pixels of the
-        coarse (letterboxed full frame) and the fine (ROI window) pass must lie within the trained
-        range widened by :data:`DISPARITY_TOLERANCE`. The coarse pass only has to *find* the target,
-        so its low end may go down to :data:`COARSE_DETECTION_FLOOR_PX` (the fine pass, whose
-        disparity does not depend on the focal length, keeps the trained range).
+        coarse (letterboxed full frame, tiled if :meth:`coarse_tiles_for` says so) and the fine (ROI
+        window) pass must lie within the trained range widened by :data:`DISPARITY_TOLERANCE`. The
+        coarse pass only has to *find* the target, so its low end may go down to
+        :data:`COARSE_DETECTION_FLOOR_PX` (the fine pass, whose disparity does not depend on the focal
+        length, keeps the trained range).
 
         Args:
             rig: a :class:`~spacepose.calibration.rig.StereoRig` (focal from ``M1``, baseline
@@ -284,19 +307,20 @@ class ModelBundle:
             BundleError: saying which pass, the disparity range it would see and the trained one.
         """
         focal, baseline, size = _rig_numbers(rig)
-        lo, hi = self.trained_disparity_px()
-        lo_ok, hi_ok = lo * (1.0 - DISPARITY_TOLERANCE), hi * (1.0 + DISPARITY_TOLERANCE)
-        near, far = self.distance_range_m
-        for name, (d_lo, d_hi) in expected_disparity_px(self, focal, baseline, size).items():
-            floor = min(lo_ok, COARSE_DETECTION_FLOOR_PX) if name == "coarse" else lo_ok
-            if d_lo < floor or d_hi > hi_ok:
-                raise BundleError(
-                    f"bundle {self.path.name!r} does not fit this calibration: at {near:g}-{far:g} m the "
-                    f"{name} pass would see {d_lo:.1f}-{d_hi:.1f} px disparity (f={focal:.1f} px, "
-                    f"B={baseline:.3f} m, {size[0]}x{size[1]}), but the stereo graph was trained for "
-                    f"{lo:.1f}-{hi:.1f} px (rig f={self.rig.focal_px:g} px, B={self.rig.baseline_m:g} m, "
-                    f"{self.rig.image_size[0]}x{self.rig.image_size[1]}); retrain or use a matching rig"
-                )
+        tiles = self.coarse_tiles_for(rig)
+        problem = self._coarse_problem(focal, baseline, size, tiles)
+        if problem is not None:
+            name, (d_lo, d_hi) = problem
+            lo, hi = self.trained_disparity_px()
+            near, far = self.distance_range_m
+            where = f" ({tiles}x{tiles} tiles)" if name == "coarse" and tiles > 1 else ""
+            raise BundleError(
+                f"bundle {self.path.name!r} does not fit this calibration: at {near:g}-{far:g} m the "
+                f"{name} pass{where} would see {d_lo:.1f}-{d_hi:.1f} px disparity (f={focal:.1f} px, "
+                f"B={baseline:.3f} m, {size[0]}x{size[1]}), but the stereo graph was trained for "
+                f"{lo:.1f}-{hi:.1f} px (rig f={self.rig.focal_px:g} px, B={self.rig.baseline_m:g} m, "
+                f"{self.rig.image_size[0]}x{self.rig.image_size[1]}); retrain or use a matching rig"
+            )
 
 
 def _rig_numbers(rig: Any) -> tuple[float, float, tuple[int, int]]:
@@ -309,10 +333,11 @@ def _rig_numbers(rig: Any) -> tuple[float, float, tuple[int, int]]:
 
 
 def expected_disparity_px(bundle: ModelBundle, focal_px: float, baseline_m: float,
-                          image_size: tuple[int, int]) -> dict[str, tuple[float, float]]:
+                          image_size: tuple[int, int], coarse_tiles: int = 1) -> dict[str, tuple[float, float]]:
     """Disparity (stereo graph input px) of the target over the bundle's distance range, per pass.
 
-    * coarse: d = f B / Z times the letterbox scale ``min(w_in / W, h_in / H)``;
+    * coarse: d = f B / Z times the letterbox scale ``min(v_w / W, v_h / H)``, the view ``v`` being
+      the graph input (``coarse_tiles`` 1) or ``n`` of them less ``n - 1`` tile overlaps;
     * fine: the ROI window's side is ``margin * (target width + d)`` so the window disparity,
       ``w_in * B / (margin * (width_m + B))``, does not depend on Z or f; the target's width in
       metres lies between its smallest bounding-box extent and its bounding-sphere diameter. The
@@ -321,7 +346,8 @@ def expected_disparity_px(bundle: ModelBundle, focal_px: float, baseline_m: floa
     """
     near, far = bundle.distance_range_m
     w_in, h_in = bundle.stereo.input_size
-    s = min(w_in / image_size[0], h_in / image_size[1])
+    n, o = int(coarse_tiles), (COARSE_TILE_OVERLAP_PX if coarse_tiles > 1 else 0)
+    s = min((n * w_in - (n - 1) * o) / image_size[0], (n * h_in - (n - 1) * o) / image_size[1])
     coarse = (focal_px * baseline_m / far * s, focal_px * baseline_m / near * s)
     margin = bundle.stereo.window_margin
     smallest = float(np.min(bundle.bbox_max - bundle.bbox_min))

@@ -73,7 +73,13 @@ def run(args: argparse.Namespace) -> int:
         raise DatasetError(f"{len(existing)} output file(s) exist already (e.g. {existing[0]}); use --force to overwrite")
     rig = load_rig(args.calib)
     rectification = rectify(rig)
-    matcher = StereoMatcher(graph, threads=args.threads)
+    tiles, margin = 1, 1.25
+    if (graph.parent / "bundle.json").is_file():   # the graph's bundle: its window margin and, for this
+        from .bundle import load_bundle            # rig, the coarse pass's tiles (PoseEstimator does the same)
+
+        bundle = load_bundle(graph.parent, verify_graphs=False)
+        tiles, margin = bundle.coarse_tiles_for(rig), bundle.stereo.window_margin
+    matcher = StereoMatcher(graph, threads=args.threads, coarse_tiles=tiles, margin=margin)
     out_dir.mkdir(parents=True, exist_ok=True)
 
     done, failed = 0, 0

@@ -336,7 +336,8 @@ class PoseEstimator:
         self.refine = bool(refine)
         self.seed = int(seed)
         self.stereo = StereoMatcher(self.bundle.stereo_path, threads=self.threads,
-                                    margin=self.bundle.stereo.window_margin)
+                                    margin=self.bundle.stereo.window_margin,
+                                    coarse_tiles=self.bundle.coarse_tiles_for(rig))
         # fixed input sizes: onnxruntime's memory arena reuses its blocks (see StereoMatcher's mem_arena)
         self.pose_session = make_session(self.bundle.pose_path, threads=self.threads, mem_arena=True)
         self._pose_outputs = [o.name for o in self.pose_session.get_outputs()]

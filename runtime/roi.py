@@ -44,6 +44,7 @@ __all__ = [
     "bbox_from_disparity",
     "disparity_range",
     "WINDOW_DISPARITY_FILL",
+    "COARSE_TILE_OVERLAP_PX",
 ]
 
 BBox = tuple[int, int, int, int]
@@ -52,6 +53,8 @@ BBox = tuple[int, int, int, int]
 #: of the graph's ``max_disp`` (:func:`square_window`); so a rig with a long baseline still gives the
 #: graph disparities it can output, at a coarser window
 WINDOW_DISPARITY_FILL = 0.9
+#: overlap (graph px) of neighbouring tiles of a tiled coarse pass (:class:`spacepose.stereo_stage.StereoMatcher`)
+COARSE_TILE_OVERLAP_PX = 32
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,9 @@
 
 Per frame (the stereo pipeline design of the project contract):
 
-1. *coarse pass* — the whole rectified frame letterboxed into the graph's fixed input size; target
+1. *coarse pass* — the whole rectified frame letterboxed into the graph's fixed input size (or, for a
+   rig whose disparities would be too small there, into ``n`` times that size and matched as ``n x n``
+   overlapping tiles of the graph's size: ``coarse_tiles``); target
    pixels are those above ``coarse_threshold`` net pixels of disparity (Earth and stars sit at ~0);
    their box and disparity range give the ROI. Pixels that the images themselves place at infinity
    (they match better unshifted than at the predicted disparity: :mod:`spacepose.infinity`) are
@@ -131,6 +133,13 @@ class StereoMatcher:
         coarse_threshold: disparity (net pixels of the coarse view) above which a pixel is target.
         margin: window side = margin * longest side of the target box ∪ its right-image copy.
         min_side: smallest window side in full-frame pixels.
+        coarse_tiles: ``n`` >= 1. The coarse pass letterboxes the frame into a view ``n`` graph inputs
+            wide less ``(n - 1) * tile_overlap`` and runs the graph on its ``n x n`` tiles, so disparities
+            are ``n`` times larger there than in one letterboxed input (a short baseline, a small focal
+            length: :meth:`~spacepose.bundle.ModelBundle.coarse_tiles_for`), at ``n**2`` graph runs.
+            A tile's first ``tile_overlap`` columns, whose right-image matches lie left of it, are taken
+            from its left neighbour; rows are split in the middle of the overlap. 1: one letterboxed run.
+        tile_overlap: overlap of neighbouring coarse tiles in graph pixels (``coarse_tiles`` > 1).
         mem_arena: onnxruntime's CPU memory arena. On (the default since session 12): the graph's
             fixed input size makes the arena's blocks reusable from call to call; without it
             onnxruntime allocates and frees every intermediate tensor on every call. Session 12,
@@ -150,7 +159,7 @@ class StereoMatcher:
 
     def __init__(self, onnx_path: str | os.PathLike, threads: int = 2, *, coarse_threshold: float = 2.0,
                  margin: float = 1.25, min_side: int = 32, mem_arena: bool = True, infinity_check: bool = True,
-                 spinning: bool = True) -> None:
+                 spinning: bool = True, coarse_tiles: int = 1, tile_overlap: int = roi.COARSE_TILE_OVERLAP_PX) -> None:
         session = make_session(onnx_path, threads=threads, mem_arena=mem_arena, spinning=spinning)
         meta = session_metadata(session)
         shapes = {i.name: list(i.shape) for i in session.get_inputs()}
@@ -163,27 +172,36 @@ class StereoMatcher:
             (out,) = session.run(["disparity"], {"left": left, "right": right})
             return out[0, 0]
 
-        self._setup(infer, size, iters, max_disp, meta, coarse_threshold, margin, min_side, infinity_check)
+        self._setup(infer, size, iters, max_disp, meta, coarse_threshold, margin, min_side, infinity_check,
+                    coarse_tiles, tile_overlap)
         self.session = session
         self.path = str(onnx_path)
 
     @classmethod
     def from_callable(cls, infer: InferFn, input_size: tuple[int, int], *, iters: int, max_disp: float = 192.0,
                       metadata: dict[str, Any] | None = None, coarse_threshold: float = 2.0, margin: float = 1.25,
-                      min_side: int = 32, infinity_check: bool = True) -> "StereoMatcher":
+                      min_side: int = 32, infinity_check: bool = True, coarse_tiles: int = 1,
+                      tile_overlap: int = roi.COARSE_TILE_OVERLAP_PX) -> "StereoMatcher":
         """A matcher around any ``infer(left, right) -> (h, w)`` (e.g. a torch model for benchmarks)."""
         self = cls.__new__(cls)
         meta = dict(metadata or {"kind": "stereo", "input_size": list(input_size), "iters": iters, "max_disp": max_disp})
         self._setup(infer, (int(input_size[0]), int(input_size[1])), int(iters), float(max_disp), meta,
-                    coarse_threshold, margin, min_side, infinity_check)
+                    coarse_threshold, margin, min_side, infinity_check, coarse_tiles, tile_overlap)
         self.session = None
         self.path = None
         return self
 
     def _setup(self, infer: InferFn, size: tuple[int, int], iters: int, max_disp: float, meta: dict[str, Any],
-               coarse_threshold: float, margin: float, min_side: int, infinity_check: bool = True) -> None:
+               coarse_threshold: float, margin: float, min_side: int, infinity_check: bool = True,
+               coarse_tiles: int = 1, tile_overlap: int = roi.COARSE_TILE_OVERLAP_PX) -> None:
         if margin < 1.0:
             raise ValueError(f"margin must be >= 1, got {margin}")
+        if int(coarse_tiles) != coarse_tiles or coarse_tiles < 1:
+            raise ValueError(f"coarse_tiles must be an integer >= 1, got {coarse_tiles}")
+        if coarse_tiles > 1 and not 0 <= tile_overlap < min(size) // 2:
+            raise ValueError(f"tile_overlap must be in [0, {min(size) // 2}), got {tile_overlap}")
+        self.coarse_tiles = int(coarse_tiles)
+        self.tile_overlap = int(tile_overlap) if coarse_tiles > 1 else 0
         self._infer = infer
         self.input_size = size
         self.iters = iters
@@ -205,10 +223,12 @@ class StereoMatcher:
 
     def coarse(self, left: np.ndarray, right: np.ndarray, timings: dict[str, float] | None = None
                ) -> tuple[np.ndarray, roi.CropTransform]:
-        """Letterboxed pass -> (net-view disparity with padding zeroed, transform)."""
-        lv, t = roi.letterbox(left, self.input_size)
-        rv, _ = roi.letterbox(right, self.input_size)
-        disp = self._run(lv, rv, timings)
+        """Letterboxed pass -> (view disparity with padding zeroed, transform); the view is the graph's
+        input size, or the tiled view of ``coarse_tiles`` (class docstring)."""
+        view_size = self.coarse_view_size
+        lv, t = roi.letterbox(left, view_size)
+        rv, _ = roi.letterbox(right, view_size)
+        disp = self._run(lv, rv, timings) if self.coarse_tiles == 1 else self._run_tiled(lv, rv, timings)
         # zero the letterbox padding so it can never become "target"
         h, w = left.shape[:2]
         (u0, v0), (u1, v1) = t.to_net(np.array([[-0.5, -0.5], [w - 0.5, h - 0.5]]))
@@ -218,6 +238,31 @@ class StereoMatcher:
         if self.infinity_check:
             disp[infinity_regions(lv, rv, disp, min_disparity=self.coarse_threshold)] = 0.0
         return disp, t
+
+    @property
+    def coarse_view_size(self) -> tuple[int, int]:
+        """(width, height) of the coarse pass's view: ``n`` graph inputs less ``n - 1`` overlaps."""
+        n, o = self.coarse_tiles, self.tile_overlap
+        return (n * self.input_size[0] - (n - 1) * o, n * self.input_size[1] - (n - 1) * o)
+
+    def _run_tiled(self, left_view: np.ndarray, right_view: np.ndarray, timings: dict[str, float] | None
+                   ) -> np.ndarray:
+        """Disparity of the whole coarse view from its ``n x n`` overlapping tiles (class docstring)."""
+        n, o = self.coarse_tiles, self.tile_overlap
+        w_in, h_in = self.input_size
+        vw, vh = self.coarse_view_size
+        disp = np.zeros((vh, vw), dtype=np.float32)
+        for j in range(n):
+            y0 = j * (h_in - o)
+            r0 = 0 if j == 0 else o // 2                 # rows: the seam in the middle of the overlap
+            r1 = h_in if j == n - 1 else h_in - (o - o // 2)
+            for i in range(n):
+                x0 = i * (w_in - o)
+                c0 = 0 if i == 0 else o                  # columns: the left neighbour's where they overlap
+                tile = self._run(left_view[y0:y0 + h_in, x0:x0 + w_in], right_view[y0:y0 + h_in, x0:x0 + w_in],
+                                 timings)
+                disp[y0 + r0:y0 + r1, x0 + c0:x0 + w_in] = tile[r0:r1, c0:]
+        return disp
 
     def roi_from_coarse(self, coarse_disp: np.ndarray, t: roi.CropTransform, image_size: tuple[int, int]) -> RoiHint | None:
         """Target box and disparity range (full-frame) from a coarse disparity, or None."""

@@ -54,9 +54,15 @@ class TestLoad:
         b.check_fits(load_rig(PAPER_RIG_PATH))  # the paper rig at 1280x960: no BundleError
         # a rig we never trained on: half the baseline; the coarse pass still sees >= 3 px at 50 m
         base = load_rig(PAPER_RIG_PATH)
-        b.check_fits(StereoRig(base.M1, base.D1, base.M2, base.D2, base.R, base.T / 2.0, base.image_size))
-        with pytest.raises(BundleError, match="coarse"):  # a fifth of it: the target would vanish at 50 m
-            b.check_fits(StereoRig(base.M1, base.D1, base.M2, base.D2, base.R, base.T / 5.0, base.image_size))
+        half, fifth, tenth = (StereoRig(base.M1, base.D1, base.M2, base.D2, base.R, base.T / k, base.image_size)
+                              for k in (2.0, 5.0, 10.0))
+        b.check_fits(half)
+        assert b.coarse_tiles_for(base) == 1 and b.coarse_tiles_for(half) == 1
+        # a fifth of it: in one letterboxed run the target would vanish at 50 m (1.3 px); 3x3 tiles find it
+        b.check_fits(fifth)
+        assert b.coarse_tiles_for(fifth) == 3
+        with pytest.raises(BundleError, match="coarse"):  # a tenth: not even with the most tiles
+            b.check_fits(tenth)
 
     def test_a_long_baseline_fits_through_a_wider_fine_window(self):
         """B = 2 m at 800x600, f = 1000 px (session 23's rig B): the fine window's disparity would reach

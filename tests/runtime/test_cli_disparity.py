@@ -48,3 +48,28 @@ def test_missing_bundle(folder, capsys):
     rc = main(["disparity", str(folder / "seq"), "--calib", str(folder / "rig.yaml"), "--out", str(folder / "o"),
                "--bundle", str(folder / "nobundle")])
     assert rc == 2 and "not found" in capsys.readouterr().err
+
+
+def test_the_bundle_beside_the_graph_sets_the_coarse_tiles(folder, monkeypatch):
+    """A short baseline (0.4 m on the 128x96 paper rig: 2.6 px at 50 m in one coarse run) gets the
+    2x2 tiled coarse pass that the default bundle asks for, as PoseEstimator does."""
+    import numpy as np
+
+    from spacepose import stereo_stage
+    from spacepose.calibration.rig import StereoRig
+
+    seen = []
+    original = stereo_stage.StereoMatcher.__init__
+
+    def spy(self, *args, **kwargs):
+        seen.append(kwargs)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(stereo_stage.StereoMatcher, "__init__", spy)
+    base = paper_rig(128, 96)
+    save_rig(StereoRig(base.M1, base.D1, base.M2, base.D2, base.R, np.array([-0.4, 0.0, 0.0]), base.image_size),
+             folder / "short.yaml")
+    rc = main(["disparity", str(folder / "seq"), "--calib", str(folder / "short.yaml"), "--out", str(folder / "o3"),
+               "--threads", "1"])
+    assert rc == 1 and (folder / "o3" / "a.pfm").is_file()       # the broken pair is skipped
+    assert seen[-1]["coarse_tiles"] == 2 and seen[-1]["margin"] == 1.25

@@ -277,6 +277,16 @@ def test_mismatched_calibration_refused(bundle):
         PoseEstimator(rig, bundle=bundle, threads=1)
 
 
+def test_a_short_baseline_gets_the_tiled_coarse_pass():
+    """The shipped bundle on the paper rig runs one letterboxed coarse pass; with a 0.3 m baseline the
+    target would fall below the detection floor at 50 m there, and the estimator tiles it 2x2."""
+    base = paper_rig(1280, 960)
+    short = StereoRig(base.M1, base.D1, base.M2, base.D2, base.R, np.array([-0.3, 0.0, 0.0]), base.image_size)
+    assert PoseEstimator(base, threads=1).stereo.coarse_tiles == 1
+    est = PoseEstimator(short, threads=1)
+    assert est.stereo.coarse_tiles == 2 and est.stereo.coarse_view_size == (480, 480)
+
+
 def test_bad_calib_type(bundle):
     with pytest.raises(TypeError):
         PoseEstimator(42, bundle=bundle)

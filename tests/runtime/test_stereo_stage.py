@@ -128,3 +128,73 @@ class TestMatcherOnnx:
         onnx.save(model, str(path))
         with pytest.raises(BundleError, match="kind"):
             StereoMatcher(path)
+
+
+def _edge_oracle(calls):
+    """A fake graph that measures the disparity of one bright box: per row, the left view's first bright
+    column minus the right view's (their last ones where the box is cut by the view's left edge), on
+    the left view's bright pixels (counts its calls)."""
+
+    def infer(left, right):
+        calls.append(left.shape)
+        lb, rb = left[0, 0] > 60, right[0, 0] > 60
+        out = np.zeros(lb.shape, np.float32)
+        for r in range(lb.shape[0]):
+            if lb[r].any() and rb[r].any():
+                if lb[r, 0]:   # last bright columns: left minus right
+                    out[r, lb[r]] = np.argmax(rb[r, ::-1]) - np.argmax(lb[r, ::-1])
+                else:
+                    out[r, lb[r]] = np.argmax(lb[r]) - np.argmax(rb[r])
+        return out
+
+    return infer
+
+
+class TestTiledCoarsePass:
+    def test_the_view_is_assembled_from_the_tiles(self):
+        # a graph that returns each tile's column index shows which tile owns which column: the
+        # left neighbour's where tiles overlap (their right-image matches lie left of the tile)
+        calls = []
+
+        def columns(left, right):
+            calls.append(left.shape)
+            return np.broadcast_to(np.arange(64, dtype=np.float32), (64, 64)).copy()
+
+        m = StereoMatcher.from_callable(columns, (64, 64), iters=2, coarse_tiles=2, tile_overlap=8,
+                                        infinity_check=False, coarse_threshold=-1.0)
+        assert m.coarse_view_size == (120, 120)
+        frame = np.full((120, 120), 100, np.uint8)
+        disp, t = m.coarse(frame, frame)
+        assert len(calls) == 4 and disp.shape == (120, 120) and t.scale == pytest.approx(1.0)
+        np.testing.assert_array_equal(disp[:, :64], np.tile(np.arange(64), (120, 1)))     # tile 0 up to its right edge
+        np.testing.assert_array_equal(disp[:, 64:], np.tile(np.arange(8, 64), (120, 1)))  # tile 1 past its overlap
+        # a graph that echoes the left view: the tiles put together give back the whole view
+        echo = StereoMatcher.from_callable(lambda lv, rv: lv[0, 0].copy(), (64, 64), iters=2, coarse_tiles=3,
+                                           tile_overlap=8, infinity_check=False)
+        rng = np.random.default_rng(1)
+        img = rng.integers(0, 255, (176, 176)).astype(np.uint8)
+        disp, _ = echo.coarse(img, img)
+        np.testing.assert_array_equal(disp, img.astype(np.float32))
+
+    def test_tiles_find_a_target_one_run_misses(self):
+        # a 5 px disparity in a 160x120 frame is 2 px in one 64x64 letterbox (not above the 2 px
+        # threshold: no target); 2x2 tiles make the view 120 px high, 3.75 px
+        left = np.zeros((120, 160), np.uint8)
+        left[40:80, 60:110] = 200
+        right = np.zeros_like(left)
+        right[40:80, 55:105] = 200
+        calls = []
+        one = StereoMatcher.from_callable(_edge_oracle(calls), (64, 64), iters=2, infinity_check=False)
+        assert one.match(left, right).status == "no_target" and len(calls) == 1
+        calls.clear()
+        tiled = StereoMatcher.from_callable(_edge_oracle(calls), (64, 64), iters=2, infinity_check=False,
+                                            coarse_tiles=2, tile_overlap=8)
+        res = tiled.match(left, right)
+        assert res.status == "fine" and len(calls) == 5   # four tiles, then the fine pass
+        x0, y0, x1, y1 = res.coarse_bbox
+        assert x0 <= 61 and y0 <= 41 and x1 >= 109 and y1 >= 79 and x1 - x0 < 80
+
+    @pytest.mark.parametrize("tiles, overlap", [(0, 8), (1.5, 8), (2, 32), (2, -1)])
+    def test_bad_tiling(self, tiles, overlap):
+        with pytest.raises(ValueError):
+            StereoMatcher.from_callable(_oracle(1.0), (64, 64), iters=2, coarse_tiles=tiles, tile_overlap=overlap)
