@@ -156,7 +156,7 @@ def bad_input_record(name: str, message: str) -> dict:
     nan3 = [None] * 3
     return {"frame": name, "valid": False, "status": "bad_input", "R": [nan3, nan3, nan3], "t": nan3,
             "q_wxyz": [None] * 4, "confidence": 0.0, "timings_ms": {}, "n_points": 0, "roi": None,
-            "tracked": False, "detail": message}
+            "tracked": False, "depth_tolerance_m": None, "detail": message}
 
 
 def run(args: argparse.Namespace) -> int:

@@ -39,7 +39,7 @@ RIGS = {  # name: (what it is, the eval-pose run's folder name)
     "E": "640x480, f 500, B 1.5 m",
     "F": "paper rig with B 0.3 m (2x2 tiled coarse pass)",
 }
-KEEP = ("frame", "regime", "distance", "valid", "status", "e_t", "e_R", "decided_by")
+KEEP = ("frame", "regime", "distance", "valid", "status", "e_t", "e_R", "decided_by", "depth_tolerance_m")
 
 
 def collect(runs: Path) -> None:
@@ -54,8 +54,10 @@ def collect(runs: Path) -> None:
 
 
 def table() -> None:
-    print("| rig | frames | valid | mean e_t / e_R | median e_t / e_R | wrong | > 90° | valid at 10-20 / 20-30 / 30-40 / 40-50 m |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| rig | frames | valid | mean e_t / e_R | median e_t / e_R | wrong | > 90° | valid at 10-20 / 20-30 / 30-40 / 40-50 m "
+          "| e_t <= depth_tolerance_m (its largest) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    within = total = 0
     for name, what in RIGS.items():
         path = HERE / f"rig_{name}.json.gz"
         if not path.is_file():
@@ -73,8 +75,12 @@ def table() -> None:
             bins.append(f"{100 * sum(r['valid'] for r in b) / len(b):.0f}" if b else "–")
         stats = (f"{e_t.mean():.3f} m / {e_r.mean():.2f}° | {np.median(e_t):.3f} m / {np.median(e_r):.2f}°"
                  if valid else "– | –")
+        tau = np.array([r["depth_tolerance_m"] for r in valid])
+        inside = int(np.sum(e_t <= tau))
+        within, total = within + inside, total + len(valid)
         print(f"| {name}: {what} | {len(rows)} | {len(valid)} ({100 * len(valid) / len(rows):.1f} %) | {stats} | "
-              f"{wrong} | {far} | {' / '.join(bins)} % |")
+              f"{wrong} | {far} | {' / '.join(bins)} % | {inside} of {len(valid)} ({tau.max() if valid else 0:.2f} m) |")
+    print(f"\nvalid poses with e_t <= depth_tolerance_m, all sets: {within} of {total}")
 
 
 if __name__ == "__main__":

@@ -277,6 +277,14 @@ def test_mismatched_calibration_refused(bundle):
         PoseEstimator(rig, bundle=bundle, threads=1)
 
 
+def test_the_json_line_carries_the_depth_tolerance_of_a_valid_pose():
+    pose = dict(R=np.eye(3), t=np.array([0.0, 0.0, 20.0]), q_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), confidence=0.8)
+    assert PoseResult(valid=True, status="ok", depth_tolerance_m=0.61, **pose).to_dict()["depth_tolerance_m"] == 0.61
+    assert PoseResult(valid=False, status="weak_votes", depth_tolerance_m=0.61, **pose).to_dict()[
+        "depth_tolerance_m"] is None
+    assert PoseResult(valid=True, status="ok", **pose).to_dict()["depth_tolerance_m"] is None   # no registration
+
+
 def test_a_short_baseline_gets_the_tiled_coarse_pass():
     """The shipped bundle on the paper rig runs one letterboxed coarse pass; with a 0.3 m baseline the
     target would fall below the detection floor at 50 m there, and the estimator tiles it 2x2."""
