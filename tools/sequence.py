@@ -41,8 +41,9 @@ def tumble(R0: np.ndarray, axis: np.ndarray, rate_deg: float, frames: int) -> np
 
 
 def render_sequence(out: str | Path, frames: int = 60, distance_m: float = 15.0, rate_deg: float = 2.0,
-                    regime: str = "sun", seed: int = 7, size: tuple[int, int] = (640, 480)) -> Path:
-    """Render the sequence (module docstring) into ``out`` (must not exist yet)."""
+                    regime: str = "sun", seed: int = 7, size: tuple[int, int] = (640, 480), rig=None) -> Path:
+    """Render the sequence (module docstring) into ``out`` (must not exist yet), seen by ``rig`` (an ideal
+    parallel :class:`~spacepose.calibration.rig.StereoRig`, scaled to ``size``; default the paper rig)."""
     from spacepose.calibration.rig import paper_rig, save_rig
     from spacepose.errors import DatasetError
     from spacepose.imageio import write_image
@@ -53,7 +54,10 @@ def render_sequence(out: str | Path, frames: int = 60, distance_m: float = 15.0,
     root = Path(out)
     if root.exists():
         raise DatasetError(f"{root} exists; choose a new folder")
-    rig = paper_rig(*size)
+    if rig is None:
+        rig = paper_rig(*size)
+    elif tuple(rig.image_size) != tuple(size):
+        rig = rig.scaled(*size)
     target = load_target("tdrs")
     camera = StereoCamera.from_rig(rig)
     sampler = PoseSampler(camera, target.bounding_radius, (distance_m, distance_m + 1e-6))
@@ -134,7 +138,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     r.add_argument("--rate", type=float, default=2.0, help="degrees per frame")
     r.add_argument("--regime", default="sun")
     r.add_argument("--seed", type=int, default=7)
-    r.add_argument("--size", default="640x480")
+    r.add_argument("--size", default=None, help="WIDTHxHEIGHT (default: the rig's size, or 640x480)")
+    r.add_argument("--rig", type=Path, default=None,
+                   help="ideal parallel rig file to render with (default: the paper rig scaled to --size)")
     e = sub.add_parser("eval")
     e.add_argument("folder", type=Path)
     e.add_argument("--bundle", type=Path, default=None)
@@ -145,8 +151,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     if args.cmd == "render":
-        w, h = (int(v) for v in args.size.lower().split("x"))
-        render_sequence(args.out, args.frames, args.distance, args.rate, args.regime, args.seed, (w, h))
+        from spacepose.calibration.rig import load_rig
+
+        rig = load_rig(args.rig) if args.rig is not None else None
+        size = args.size or ("x".join(map(str, rig.image_size)) if rig is not None else "640x480")
+        w, h = (int(v) for v in size.lower().split("x"))
+        render_sequence(args.out, args.frames, args.distance, args.rate, args.regime, args.seed, (w, h), rig)
         print(f"wrote {args.frames} frames to {args.out}")
         return 0
     report = evaluate_sequence(args.folder, args.bundle, args.threads, args.prior_max_gap)

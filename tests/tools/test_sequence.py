@@ -45,3 +45,17 @@ def test_render_and_evaluate_a_short_sequence(tmp_path, capsys):
     assert main(["eval", str(out), "--threads", "1", "--json", str(tmp_path / "r.json"), "--prior-max-gap", "0"]) == 0
     assert json.loads((tmp_path / "r.json").read_text())["summary"]["frames"] == 3
     assert "summary:" in capsys.readouterr().out
+
+
+def test_render_with_another_rig(tmp_path):
+    from spacepose.calibration.rig import StereoRig, load_rig, save_rig
+
+    K = np.array([[250.0, 0.0, 79.5], [0.0, 250.0, 59.5], [0.0, 0.0, 1.0]])
+    rig = StereoRig(K, np.zeros(5), K, np.zeros(5), np.eye(3), np.array([-0.5, 0.0, 0.0]), (160, 120))
+    save_rig(rig, tmp_path / "short.yaml")
+    assert main(["render", str(tmp_path / "seq"), "--frames", "1", "--distance", "30", "--rig",
+                 str(tmp_path / "short.yaml")]) == 0
+    assert load_rig(tmp_path / "seq" / "rig.yaml").allclose(rig)
+    out = render_sequence(tmp_path / "seq2", frames=1, distance_m=30.0, size=(80, 60), rig=rig)
+    half = load_rig(out / "rig.yaml")
+    assert half.image_size == (80, 60) and half.baseline_m == pytest.approx(0.5)
