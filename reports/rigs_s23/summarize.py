@@ -17,6 +17,15 @@ How the rows were made (each rig file is in this folder; the frames are rendered
     python -m spacepose.tools.derectify data/paper1280_s23b data/paper1280_raw_s23b --seed 2332 --split train
     spacepose eval-pose DATASET --split train --limit 200 --threads 1 --overlays 0 --out runs/s23/rig_NAME
 
+Tracking (``seq_RIG_K.json.gz``): three tumbling sequences per rig, 40 frames each, run in order with the prior,
+
+    python -m spacepose.tools.sequence render data/seqrig_RIG_1 --frames 40 --distance 15 --rate 2 --regime sun --seed 601 [--rig FILE]
+    python -m spacepose.tools.sequence render data/seqrig_RIG_2 --frames 40 --distance 25 --rate 2 --regime albedo --seed 602 [--rig FILE]
+    python -m spacepose.tools.sequence render data/seqrig_RIG_3 --frames 40 --distance 35 --rate 2 --regime penumbra --seed 603 [--rig FILE]
+    python -m spacepose.tools.sequence eval data/seqrig_RIG_K --threads 1 --json runs/s23/seq/seqrig_RIG_K.json
+
+(the paper rig with ``--size 1280x960`` and no ``--rig``; rigs A, B and F with their files).
+
 (``--workers 2`` on the renders; the render refuses depths at which the target cannot be wholly in
 both views, hence ``--depth`` for rigs C and D.) Wrong: e_R > 20 deg or e_t > 0.5 m; far: e_R > 90 deg.
 """
@@ -51,6 +60,43 @@ def collect(runs: Path) -> None:
         rows = [{k: r.get(k) for k in KEEP} for r in json.loads(src.read_text())["frames"]]
         with gzip.open(HERE / f"rig_{name}.json.gz", "wt") as fh:
             json.dump({"rig": RIGS[name], "frames": rows}, fh)
+
+
+SEQ_RIGS = ("paper", "A", "B", "F")
+SEQ_KEEP = ("frame", "valid", "status", "tracked", "e_t", "e_R")
+
+
+def collect_sequences(runs: Path) -> None:
+    for rig in SEQ_RIGS:
+        for k in (1, 2, 3):
+            src = runs / "seq" / f"seqrig_{rig}_{k}.json"
+            if not src.is_file():
+                print(f"sequence {rig} {k}: no run at {src}")
+                continue
+            rows = [{key: r.get(key) for key in SEQ_KEEP} for r in json.loads(src.read_text())["frames"]]
+            with gzip.open(HERE / f"seq_{rig}_{k}.json.gz", "wt") as fh:
+                json.dump({"rig": rig, "frames": rows}, fh)
+
+
+def sequence_table() -> None:
+    print("\n| rig | sequences (15 / 25 / 35 m) | valid | tracked | wrong | > 90° | valid per sequence |")
+    print("|---|---|---|---|---|---|---|")
+    for rig in SEQ_RIGS:
+        per, rows = [], []
+        for k in (1, 2, 3):
+            path = HERE / f"seq_{rig}_{k}.json.gz"
+            if path.is_file():
+                with gzip.open(path, "rt") as fh:
+                    fr = json.load(fh)["frames"]
+                per.append(sum(r["valid"] for r in fr))
+                rows += fr
+        if not rows:
+            continue
+        valid = [r for r in rows if r["valid"]]
+        wrong = sum(r["e_R"] > 20.0 or r["e_t"] > 0.5 for r in valid)
+        far = sum(r["e_R"] > 90.0 for r in valid)
+        print(f"| {rig}: {RIGS[rig]} | {len(per)} x 40 | {len(valid)} of {len(rows)} | "
+              f"{sum(bool(r['tracked']) for r in valid)} | {wrong} | {far} | {' / '.join(map(str, per))} |")
 
 
 def table() -> None:
@@ -89,4 +135,6 @@ if __name__ == "__main__":
     args = parser.parse_args()
     if args.collect is not None:
         collect(args.collect)
+        collect_sequences(args.collect)
     table()
+    sequence_table()
