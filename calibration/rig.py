@@ -281,7 +281,8 @@ def load_rig(path: str | os.PathLike[str]) -> StereoRig:
     """Read a rig from an OpenCV FileStorage file (``.yaml``/``.yml``/``.xml``/``.json``).
 
     The optional rectification keys (``R1, R2, P1, P2, Q``) are shape-checked but otherwise ignored:
-    :func:`spacepose.calibration.rectify.rectify` recomputes them.
+    :func:`spacepose.calibration.rectify.rectify` recomputes them. A file ``R1`` more than
+    :data:`R1_WARN_DEG` from the recomputed one is logged as a warning (the pose's reference frame).
 
     Raises:
         CalibrationError: missing file, unknown extension or unparseable file (``key=None``); a
@@ -307,11 +308,13 @@ def load_rig(path: str | os.PathLike[str]) -> StereoRig:
             if key not in keys:
                 raise CalibrationError(f"{path}: missing key {key!r} (needs {', '.join(_REQUIRED_KEYS)})", key=key)
             values[key] = _read_node(fs.getNode(key), key, path)
+        optional = {}
         for key, shape in _OPTIONAL_SHAPES.items():
             if key in keys:
                 array = _as_float_array(_read_node(fs.getNode(key), key, path), key)
                 if array.shape != shape:
                     raise CalibrationError(f"{path}: {key} must have shape {shape}, got {array.shape}", key=key)
+                optional[key] = array
     finally:
         fs.release()
     try:
@@ -321,8 +324,32 @@ def load_rig(path: str | os.PathLike[str]) -> StereoRig:
         )
     except CalibrationError as err:
         raise CalibrationError(f"{path}: {err}", key=err.key) from err
+    if "R1" in optional:
+        _warn_if_other_rectification(rig, optional["R1"], path)
     log.debug("loaded rig %s: %dx%d, baseline %.4f m", path, rig.width, rig.height, rig.baseline_m)
     return rig
+
+
+#: a file's ``R1`` further than this from ``cv2.stereoRectify``'s is reported (degrees)
+R1_WARN_DEG = 0.05
+
+
+def _warn_if_other_rectification(rig: StereoRig, R1: np.ndarray, path: Path) -> float:
+    """Log a warning when the file's ``R1`` turns the left camera otherwise than ``cv2.stereoRectify``
+    does: poses are reported in the latter's left rectified camera, so a tool that rectified with the
+    file's ``R1`` would see them turned by that angle. Returns the angle in degrees (NaN if not compared)."""
+    from .rectify import rectify  # here: rectify imports this module
+
+    try:
+        ours = np.asarray(rectify(rig).R1)
+    except CalibrationError:
+        return float("nan")          # rectify refuses the rig itself; the runtime will say why
+    cos = (np.trace(ours.T @ R1) - 1.0) / 2.0
+    angle = float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    if not angle <= R1_WARN_DEG:
+        log.warning("%s: its R1 is %.3f deg from cv2.stereoRectify's; spacepose ignores it and reports poses in "
+                    "cv2.stereoRectify's left rectified camera (CONVENTIONS.md)", path, angle)
+    return angle
 
 
 def _write(rig: StereoRig, path: str, with_rectification: bool) -> None:

@@ -162,6 +162,22 @@ class TestSaveLoad:
         assert "Q" not in path.read_text()
         assert load_rig(path) == distorted_rig()
 
+    def test_a_file_r1_other_than_opencvs_is_reported(self, tmp_path, caplog):
+        """The pose is in cv2.stereoRectify's left rectified camera; a file whose R1 turns the left
+        camera otherwise (another tool's rectification) is loaded, with a warning naming the angle."""
+        rig = distorted_rig()
+        with caplog.at_level("WARNING", logger="spacepose.calibration.rig"):
+            load_rig(save_rig(rig, tmp_path / "own.yaml"))            # save_rig writes OpenCV's own R1
+        assert not caplog.records
+        from spacepose.calibration.rectify import rectify
+
+        R1 = np.asarray(rectify(rig).R1)
+        turned = cv2.Rodrigues(np.array([0.0, 0.0, np.radians(1.0)]))[0] @ R1
+        path = write_storage(tmp_path / "other.yaml", {**rig_values(rig), "R1": turned})
+        with caplog.at_level("WARNING", logger="spacepose.calibration.rig"):
+            assert load_rig(path) == rig
+        assert len(caplog.records) == 1 and "1.000 deg" in caplog.text and "ignores it" in caplog.text
+
     def test_refuses_to_overwrite(self, tmp_path):
         path = tmp_path / "rig.yaml"
         save_rig(paper_rig(), path)
