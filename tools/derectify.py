@@ -58,6 +58,12 @@ class RawRigConfig:
     focal_pct: float = 3.0
     centre_pct: float = 2.0
 
+    def __post_init__(self) -> None:
+        for name in ("rot_deg", "focal_pct", "centre_pct"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0.0 <= value <= 45.0):
+                raise ValueError(f"{name} must be in [0, 45], got {value}")
+
 
 @dataclass(frozen=True)
 class RawRig:

@@ -113,3 +113,9 @@ def test_refuses_to_overwrite_and_non_ideal_sources(scene, tmp_path):
     with pytest.raises(DatasetError, match="differ"):
         derectify_dataset(src, src, seed=1, force=True)
     assert (src / "left" / "000000.png").is_file()   # the source is untouched
+
+
+@pytest.mark.parametrize("kwargs", [{"rot_deg": -1.0}, {"focal_pct": float("nan")}, {"centre_pct": 90.0}])
+def test_config_out_of_range(kwargs):
+    with pytest.raises(ValueError):
+        RawRigConfig(**kwargs)
