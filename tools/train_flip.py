@@ -1,7 +1,8 @@
 """Train the flip classifier (:class:`spacepose.models.flip_net.FlipNet`) on views of a rendered dataset.
 
-``spacepose train-flip DATASET --out runs/flip --val VAL_DATASET`` builds the sample caches
-(:mod:`spacepose.tools.flip_data`; ``OUT/train_samples.npz`` from DATASET's train split,
+``spacepose train-flip DATASET [--more DATASET2 ...] --out runs/flip --val VAL_DATASET`` builds the sample caches
+(:mod:`spacepose.tools.flip_data`; ``OUT/train_samples.npz`` from DATASET's train split, ``train_samples_K.npz``
+from the K-th ``--more`` one's,
 ``OUT/val_samples.npz`` from VAL_DATASET) once, then trains with AdamW and a cosine learning rate,
 binary cross-entropy on the logit of "slot A is the right pose", photometric augmentation on every
 batch. Checkpoints ``OUT/last.pt`` every ``--ckpt-every`` steps (``--resume`` continues one), a JSON
@@ -35,6 +36,9 @@ KIND = "flip"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dataset", type=Path, help="rendered dataset (its train split is used)")
+    parser.add_argument("--more", type=Path, action="append", default=[],
+                        help="another rendered dataset whose train split is added (repeatable; its samples are "
+                             "cached in OUT/train_samples_K.npz, drawn with seed + 1000 K)")
     parser.add_argument("--val", type=Path, required=True, help="a dataset rendered with another seed (validation)")
     parser.add_argument("--out", type=Path, default=Path("runs/flip"))
     parser.add_argument("--bundle", type=Path, default=None, help="bundle whose silhouette samples draw the outlines")
@@ -146,6 +150,10 @@ def run(args: argparse.Namespace) -> int:
         raise SpaceposeError(f"--stop-step must be >= 0 (0: none), got {args.stop_step}")
     train = _samples(out / "train_samples.npz", args.dataset, bundle, split="train", per_frame=args.per_frame,
                      seed=args.seed, size=args.size, limit=None, neither_prob=args.neither_prob)
+    for k, more in enumerate(args.more, start=1):
+        extra = _samples(out / f"train_samples_{k}.npz", more, bundle, split="train", per_frame=args.per_frame,
+                         seed=args.seed + 1000 * k, size=args.size, limit=None, neither_prob=args.neither_prob)
+        train = {key: np.concatenate([train[key], extra[key]]) for key in train}
     val = _samples(out / "val_samples.npz", args.val, bundle, split=None, per_frame=1, seed=args.seed + 1,
                    size=args.size, limit=args.val_frames, neither_prob=args.neither_prob)
     config = FlipNetConfig(size=args.size)

@@ -208,3 +208,17 @@ def test_export_refuses_a_checkpoint_of_another_kind(tmp_path):
     torch.save({"kind": "pose"}, tmp_path / "x.pt")
     assert main(["export-flip", str(tmp_path / "x.pt"), "--out", str(tmp_path / "flip.onnx")]) == 2
     assert not (tmp_path / "flip.onnx").exists()
+
+
+def test_more_datasets_add_their_own_cached_samples(synthetic_dataset, plate_bundle, tmp_path):
+    from spacepose.tools.flip_data import load_samples, samples_info
+
+    out = tmp_path / "more"
+    args = ["train-flip", str(synthetic_dataset), "--more", str(synthetic_dataset), "--val", str(synthetic_dataset),
+            "--out", str(out), "--bundle", str(plate_bundle), "--size", "32", "--batch", "4", "--per-frame", "2",
+            "--val-frames", "4", "--steps", "1", "--ckpt-every", "1", "--val-every", "1", "--seed", "3"]
+    assert main(args) == 0
+    first, second = load_samples(out / "train_samples.npz"), load_samples(out / "train_samples_1.npz")
+    assert len(second["labels"]) == len(first["labels"]) > 0
+    assert samples_info(out / "train_samples_1.npz")["seed"] == 1003      # its own draw of poses
+    assert not np.array_equal(first["views"], second["views"])
