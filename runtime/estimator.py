@@ -590,6 +590,11 @@ class PoseEstimator:
             if flip_p <= fc.veto_prob and (outline.decided(sil) or conclusive):
                 return _stage_invalid(stage, "weak_votes", factors), (
                     f"the flip classifier gives the decided pose {flip_p:.2f} against its flip")
+            if (fc.loose_fit_min_prob > 0.0 and outline.decided(sil) and outline.best.chamfer_px > sil.max_chamfer_px
+                    and not flip_p >= fc.loose_fit_min_prob):
+                return _stage_invalid(stage, "weak_votes", factors), (
+                    f"the outline fits loosely ({outline.best.chamfer_px:.2f} px > {sil.max_chamfer_px:g} px) and the "
+                    f"flip classifier gives the pose only {flip_p:.3f} (< {fc.loose_fit_min_prob:g})")
         learned = self._learned_choice(outline, flip_p, reg.tau_m)
         if outline is not None and outline.decided(sil):
             if conclusive and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:

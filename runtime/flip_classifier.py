@@ -50,6 +50,10 @@ class FlipClassifierConfig:
     max_depth_tolerance_m: a frame it decides must have a registration depth tolerance (``tau``, metres:
         :class:`spacepose.registration.RegistrationResult`) of at most this; 0: no such check. Far frames
         have coarse stereo depth: on session 21's check sets the poses it added that were wrong were there.
+    loose_fit_min_prob: a pose the silhouette stage decides with an outline chamfer above the silhouette's
+        ``max_chamfer_px`` (the image route's looser fit) is refused unless the classifier gives it at
+        least this; 0: no such check. Both image-route poses > 90° off on fresh frames of sessions 22-23
+        had such fits and p 0.95-0.98 (``reports/flip_s23/gate_rule.txt``).
     """
 
     file: str = "flip.onnx"
@@ -61,6 +65,7 @@ class FlipClassifierConfig:
     min_margin_px: float = 0.0
     max_polish_deg: float = 0.0
     max_depth_tolerance_m: float = 0.0
+    loose_fit_min_prob: float = 0.0
 
     def __post_init__(self) -> None:
         if self.size < 16:
@@ -73,6 +78,8 @@ class FlipClassifierConfig:
         if min(self.max_chamfer_px, self.min_margin_px, self.max_polish_deg, self.max_depth_tolerance_m) < 0:
             raise ValueError("flip_classifier: max_chamfer_px, min_margin_px, max_polish_deg and "
                              "max_depth_tolerance_m must be >= 0")
+        if not 0.0 <= self.loose_fit_min_prob <= 1.0:
+            raise ValueError(f"flip_classifier.loose_fit_min_prob must be in [0, 1], got {self.loose_fit_min_prob}")
 
 
 def parse_flip_classifier(section: Any) -> FlipClassifierConfig | None:

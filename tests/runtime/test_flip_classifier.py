@@ -328,3 +328,36 @@ def test_quantized_copies_keep_the_flip_graph_float32(tmp_path):
     out = quantize_bundle(est.bundle.path, tmp_path / "fp16", "fp16")
     assert (out / "flip.onnx").read_bytes() == (est.bundle.path / "flip.onnx").read_bytes()
     assert load_bundle(out).flip_classifier.decide_prob == 0.9
+
+
+@pytest.mark.parametrize("prob, chamfer, margin, gate, valid, route", [
+    (0.95, 1.5, 0.3, 0.99, False, ""),          # the image route's loose fit, the classifier not sure enough: refused
+    (0.995, 1.5, 0.3, 0.99, True, "image"),     # ... sure enough: kept
+    (0.95, 1.5, 0.3, 0.0, True, "image"),       # the gate off (the default): kept
+    (0.5, 0.5, 0.8, 0.99, True, "outline"),     # a tight outline decision is not the gate's business
+])
+def test_a_loose_outline_fit_needs_the_classifier(tmp_path, monkeypatch, prob, chamfer, margin, gate, valid, route):
+    """flip_classifier.loose_fit_min_prob: a pose decided with a chamfer above silhouette.max_chamfer_px (the
+    image route, up to image_max_chamfer_px) must get at least that probability from the classifier."""
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.image_vote import ImageVote
+
+    left, right = synthetic_pair()
+    silhouette = {"image_max_chamfer_px": 2.0, "image_min_score": 0.1, "image_min_margin_px": 0.2}
+    est = _flip_estimator(tmp_path, monkeypatch, prob, silhouette=silhouette, loose_fit_min_prob=gate,
+                          decide_prob=0.999)
+    assert est.bundle.flip_classifier.loose_fit_min_prob == gate
+    vote = ImageVote(0.3, 500, 0.0, 0.1, True)
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, chamfer, margin, vote))
+    monkeypatch.setattr(estimator_module, "polish_pose", lambda *a, **k: None)
+    res = est.estimate(left, right)
+    assert res.valid == valid, res.detail
+    assert res.decided_by == route
+    if not valid:
+        assert res.status == "weak_votes" and "fits loosely" in res.detail
+
+
+def test_loose_fit_min_prob_must_be_a_probability():
+    with pytest.raises(BundleError, match="loose_fit_min_prob"):
+        parse_flip_classifier({"loose_fit_min_prob": 1.5})
