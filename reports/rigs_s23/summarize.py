@@ -48,7 +48,8 @@ RIGS = {  # name: (what it is, the eval-pose run's folder name)
     "E": "640x480, f 500, B 1.5 m",
     "F": "paper rig with B 0.3 m (2x2 tiled coarse pass)",
 }
-KEEP = ("frame", "regime", "distance", "valid", "status", "e_t", "e_R", "decided_by", "depth_tolerance_m")
+KEEP = ("frame", "regime", "distance", "valid", "status", "e_t", "e_R", "decided_by", "depth_tolerance_m",
+        "outline_chamfer_px", "flip_prob")
 
 
 def collect(runs: Path) -> None:
