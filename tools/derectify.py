@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import shutil
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -44,6 +43,7 @@ from spacepose.calibration.rig import StereoRig, load_rig, save_rig
 from spacepose.errors import DatasetError
 from spacepose.estimator import rotation_to_quaternion
 from spacepose.imageio import read_image, write_image
+from spacepose.tools.restyle import select_copy_labels
 
 log = logging.getLogger(__name__)
 
@@ -144,22 +144,7 @@ def derectify_dataset(src: str | Path, dst: str | Path, seed: int, *, config: Ra
     """Write ``dst``: ``src``'s frames (of ``split``, the first ``limit``) as the raw rig's cameras
     see them, its calibration as ``rig.yaml`` and the labels in its left rectified frame."""
     src, dst = Path(src), Path(dst)
-    if src.resolve() == dst.resolve():
-        raise DatasetError("derectify: DST must differ from SRC")
-    if dst.exists():
-        if not force:
-            raise DatasetError(f"{dst} exists; pass --force to replace it")
-        shutil.rmtree(dst)
-    labels_path = src / "labels.jsonl"
-    if not labels_path.is_file():
-        raise DatasetError(f"{src} has no labels.jsonl")
-    labels = [json.loads(line) for line in labels_path.read_text().splitlines() if line.strip()]
-    if split is not None:
-        labels = [r for r in labels if r.get("split") == split]
-    if limit is not None:
-        labels = labels[: max(int(limit), 0)]
-    if not labels:
-        raise DatasetError(f"{src}: no frames to derectify")
+    labels = select_copy_labels(src, dst, "derectify", split=split, limit=limit, force=force)
     raw = sample_raw_rig(load_rig(src / "rig.yaml"), seed, config)
     size = raw.rig.image_size
     K_ideal = np.asarray(raw.ideal.M1)

@@ -30,7 +30,7 @@ from spacepose.imageio import read_image, write_image
 
 log = logging.getLogger(__name__)
 
-__all__ = ["sample_style", "apply_style", "restyle_dataset", "main"]
+__all__ = ["sample_style", "apply_style", "select_copy_labels", "restyle_dataset", "main"]
 
 VIEWS = ("left", "right")
 
@@ -66,6 +66,33 @@ def _frame_files(folder: Path, name: str) -> list[Path]:
     return sorted(p for p in folder.glob(f"{name}.*") if p.is_file())
 
 
+def select_copy_labels(src: Path, dst: Path, what: str, *, split: str | None = None, limit: int | None = None,
+                       force: bool = False) -> list[dict[str, Any]]:
+    """The ``labels.jsonl`` lines of dataset ``src`` (of ``split``, the first ``limit``) that a copy of it
+    in ``dst`` is made from (by this module, or ``what`` else: derectify); ``dst`` is emptied with ``force``.
+
+    Raises:
+        DatasetError: ``src`` is not a dataset, ``dst`` is ``src`` or exists without ``force``, or no frame
+            is selected.
+    """
+    labels_path = src / "labels.jsonl"
+    if not labels_path.is_file() or not (src / "rig.yaml").is_file():
+        raise DatasetError(f"{src} is not a dataset (needs labels.jsonl and rig.yaml)")
+    if dst.resolve() == src.resolve():
+        raise DatasetError(f"the {what} copy must not overwrite its source (DST must differ from SRC)")
+    if dst.exists():
+        if not force:
+            raise DatasetError(f"{dst} exists; pass force=True (--force) to replace it")
+        shutil.rmtree(dst)
+    lines = [json.loads(line) for line in labels_path.read_text().splitlines() if line.strip()]
+    if split is not None:
+        lines = [line for line in lines if line.get("split", "train") == split]
+    lines = lines[:limit] if limit is not None else lines
+    if not lines:
+        raise DatasetError(f"no {split or ''} frames to {what} in {src}".replace("  ", " "))
+    return lines
+
+
 def restyle_dataset(src: Path, dst: Path, seed: int, *, split: str | None = None, limit: int | None = None,
                     force: bool = False) -> int:
     """Write the restyled copy of ``src`` (its ``split`` frames, at most ``limit``) to ``dst``; returns
@@ -76,21 +103,7 @@ def restyle_dataset(src: Path, dst: Path, seed: int, *, split: str | None = None
             is selected.
     """
     src, dst = Path(src), Path(dst)
-    labels_path = src / "labels.jsonl"
-    if not labels_path.is_file() or not (src / "rig.yaml").is_file():
-        raise DatasetError(f"{src} is not a dataset (needs labels.jsonl and rig.yaml)")
-    if dst.resolve() == src.resolve():
-        raise DatasetError("the restyled copy must not overwrite its source")
-    if dst.exists():
-        if not force:
-            raise DatasetError(f"{dst} exists; pass force=True (--force) to replace it")
-        shutil.rmtree(dst)
-    lines = [json.loads(line) for line in labels_path.read_text().splitlines() if line.strip()]
-    if split is not None:
-        lines = [line for line in lines if line.get("split", "train") == split]
-    lines = lines[:limit] if limit is not None else lines
-    if not lines:
-        raise DatasetError(f"no {split or ''} frames to restyle in {src}".replace("  ", " "))
+    lines = select_copy_labels(src, dst, "restyle", split=split, limit=limit, force=force)
     rng = np.random.default_rng(seed)
     others = [p for p in sorted(src.iterdir()) if p.is_dir() and p.name not in VIEWS]
     for sub in (*VIEWS, *(p.name for p in others)):
