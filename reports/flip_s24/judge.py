@@ -64,11 +64,11 @@ def main() -> None:
     pooled = {"S": dict(valid=0, wrong=0), "C": dict(valid=0, wrong=0)}
     clause2 = True
     for label, parts in groups.items():
-        got = {}
+        got, loaded = {}, {}
         for tag in ("S", "C"):
             frames, far = [], set()
             for p in parts:
-                fr = rows(runs, f"{p}_{tag}")
+                fr = loaded[p, tag] = rows(runs, f"{p}_{tag}")
                 frames += fr
                 far |= far_keys(fr, p)
             got[tag] = (tally(frames), far)
@@ -79,6 +79,13 @@ def main() -> None:
         clause2 &= new_far == 0
         print(f"{label:38s} S {s['valid']:4d} / {s['wrong']:2d} / {s['far']}   C {c['valid']:4d} / {c['wrong']:2d} / "
               f"{c['far']}   > 90 deg from C only: {new_far}")
+        for part, frame in sorted(c_far - s_far):
+            c_row = next(r for r in loaded[part, "C"] if r["frame"] == frame)
+            s_row = next(r for r in loaded[part, "S"] if r["frame"] == frame)
+            print(f"  > 90 deg from C only: {part} frame {frame} ({c_row.get('regime', '?')}, "
+                  f"{c_row.get('distance', float('nan')):.0f} m) e_R {c_row['e_R']:.1f} deg, {c_row['decided_by']} "
+                  f"route, chamfer {c_row['outline_chamfer_px']:.2f} px, p {c_row.get('flip_prob', float('nan')):.3f}; "
+                  f"S: {s_row['status']}, p {s_row.get('flip_prob', float('nan')):.3f}")
     s, c = pooled["S"], pooled["C"]
     clause1 = c["valid"] >= s["valid"] and c["wrong"] <= s["wrong"]
     print(f"1. pooled: S {s['valid']} valid / {s['wrong']} wrong, C {c['valid']} / {c['wrong']}: "
