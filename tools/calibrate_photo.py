@@ -53,7 +53,10 @@ def score_frames(dataset: str | Path, bundle: str | Path | None, split: str, lim
     from spacepose.pose_stage import surface_fitness
     from spacepose.tools.pose_data import read_pose_labels
 
+    from spacepose.tools.dataset import require_depth
+
     root = Path(dataset)
+    require_depth(root)
     recs = read_pose_labels(root, split)[: limit]
     model = load_bundle(bundle)
     surface = np.asarray(model.surface_points)

@@ -21,6 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     parser.add_argument("--depth", type=float, nargs=2, default=(10.0, 50.0), metavar=("MIN", "MAX"), help="target z range in metres (default 10 50)")
     parser.add_argument("--rig", default=None, help="ideal parallel rig file to render with (default: the paper rig scaled to --size)")
+    parser.add_argument("--no-depth", action="store_true",
+                        help="do not write depth/<name>.pfm (halves the maps' disk use; evaluation needs no depth)")
     parser.add_argument("--paper", action="store_true", help="the paper's dataset: --count 39600 --size 1280x960")
 
 
@@ -33,7 +35,8 @@ def run(args: argparse.Namespace) -> int:
     if args.paper:
         count, size = 39600, (1280, 960)
     shard = parse_shard(args.shard)
-    config = RenderConfig(target=args.target, count=count, size=size, seed=args.seed, depth_range=tuple(args.depth))
+    config = RenderConfig(target=args.target, count=count, size=size, seed=args.seed, depth_range=tuple(args.depth),
+                          depth_maps=not args.no_depth)
     rig = load_rig(args.rig) if args.rig else None
     start = time.perf_counter()
     interactive = sys.stderr.isatty()

@@ -7,7 +7,8 @@ Layout::
       rig.yaml                the rig the frames were rendered with (OpenCV FileStorage)
       left/<name>.png  right/<name>.png          8-bit RGB after degradations
       disparity/<name>.pfm    exact left disparity fx*B/Z on target pixels, 0 elsewhere
-      depth/<name>.pfm        left ray-cast depth Z (m) on target pixels, 0 elsewhere
+      depth/<name>.pfm        left ray-cast depth Z (m) on target pixels, 0 elsewhere (not with
+                              ``--no-depth``: the manifest then says ``"depth_maps": false``)
       mask/<name>.png  mask_right/<name>.png     255 on target pixels of the left / right image
       meta/<name>.json        the frame's label (written last: the frame's commit marker)
       labels.jsonl            all labels in frame order (rebuilt from meta/ after every run)
@@ -51,6 +52,9 @@ __all__ = [
     "prepare_dataset",
     "render_dataset",
     "frame_complete",
+    "frame_folders",
+    "require_depth",
+    "stores_depth",
     "shard_indices",
     "collect_labels",
     "parse_shard",
@@ -81,6 +85,9 @@ class RenderConfig:
         size: (width, height) of the images.
         seed: dataset seed.
         depth_range: (min, max) of the target's z in metres.
+        depth_maps: write ``depth/<name>.pfm`` (the ray-cast depth; CONVENTIONS.md makes it optional).
+            ``False`` halves the maps' disk use (an evaluation set needs no depth: 1.2 MB a frame
+            at 640x480, 4.9 MB at 1280x960); the manifest records it (``"depth_maps": false``).
     """
 
     target: str = "tdrs"
@@ -88,6 +95,7 @@ class RenderConfig:
     size: tuple[int, int] = (640, 480)
     seed: int = 0
     depth_range: tuple[float, float] = (10.0, 50.0)
+    depth_maps: bool = True
 
     def __post_init__(self) -> None:
         if isinstance(self.count, bool) or not isinstance(self.count, (int, np.integer)) or self.count < 1:
@@ -99,6 +107,7 @@ class RenderConfig:
             raise DatasetError(f"seed must be a non-negative integer, got {self.seed!r}")
         object.__setattr__(self, "size", (int(w), int(h)))
         object.__setattr__(self, "depth_range", (float(self.depth_range[0]), float(self.depth_range[1])))
+        object.__setattr__(self, "depth_maps", bool(self.depth_maps))
 
 
 def frame_name(index: int) -> str:
@@ -192,10 +201,33 @@ def _frame_path(root: Path, folder: str, name: str) -> Path:
     return root / folder / f"{name}{FRAME_FILES[folder]}"
 
 
-def frame_complete(root: str | os.PathLike, name: str) -> bool:
-    """True when every file of frame ``name`` exists (meta last, so a crash leaves it incomplete)."""
+def frame_folders(depth_maps: bool = True) -> tuple[str, ...]:
+    """The per-frame folders of a dataset (:data:`FRAME_FILES`, without ``depth`` when not ``depth_maps``)."""
+    return tuple(folder for folder in FRAME_FILES if depth_maps or folder != "depth")
+
+
+def stores_depth(root: str | os.PathLike) -> bool:
+    """Whether the dataset at ``root`` stores ``depth/`` maps (its manifest's ``depth_maps``, default true;
+    true without a readable manifest, as every dataset before the option)."""
+    try:
+        manifest = json.loads((Path(root) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return True
+    return not (isinstance(manifest, dict) and manifest.get("depth_maps", True) is False)
+
+
+def require_depth(root: str | os.PathLike) -> None:
+    """Raise :class:`DatasetError` when the dataset at ``root`` was rendered without depth maps."""
+    if not stores_depth(root):
+        raise DatasetError(f"{root} was rendered with --no-depth and holds no depth/ maps; render it again "
+                           "without --no-depth (same options) for a command that reads depth")
+
+
+def frame_complete(root: str | os.PathLike, name: str, depth_maps: bool = True) -> bool:
+    """True when every file of frame ``name`` exists (meta last, so a crash leaves it incomplete);
+    ``depth_maps`` false: the depth map is not asked for."""
     root = Path(root)
-    return all(_frame_path(root, folder, name).is_file() for folder in FRAME_FILES)
+    return all(_frame_path(root, folder, name).is_file() for folder in frame_folders(depth_maps))
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -209,8 +241,9 @@ def _atomic_write_text(path: Path, text: str) -> None:
             os.unlink(tmp)
 
 
-def write_frame(root: str | os.PathLike, frame: Frame) -> None:
-    """Write all files of ``frame``; the meta JSON goes last and atomically."""
+def write_frame(root: str | os.PathLike, frame: Frame, depth_maps: bool = True) -> None:
+    """Write all files of ``frame`` (the depth map only with ``depth_maps``); the meta JSON goes last and
+    atomically."""
     from spacepose.imageio import write_image, write_pfm
 
     root = Path(root)
@@ -218,7 +251,8 @@ def write_frame(root: str | os.PathLike, frame: Frame) -> None:
     write_image(_frame_path(root, "left", name), frame.left)
     write_image(_frame_path(root, "right", name), frame.right)
     write_pfm(_frame_path(root, "disparity", name), frame.disparity)
-    write_pfm(_frame_path(root, "depth", name), frame.depth)
+    if depth_maps:
+        write_pfm(_frame_path(root, "depth", name), frame.depth)
     write_image(_frame_path(root, "mask", name), frame.mask.astype(np.uint8) * 255)
     write_image(_frame_path(root, "mask_right", name), frame.mask_right.astype(np.uint8) * 255)
     _atomic_write_text(_frame_path(root, "meta", name), json.dumps(frame.label) + "\n")
@@ -229,7 +263,7 @@ def write_frame(root: str | os.PathLike, frame: Frame) -> None:
 
 
 def _identity(config: RenderConfig, target, rig) -> dict:
-    return {
+    identity = {
         "format": "spacepose-dataset/1",
         "generator": GENERATOR,
         "target": target.name,
@@ -247,6 +281,9 @@ def _identity(config: RenderConfig, target, rig) -> dict:
         },
         "split": {"test_per_block": 1, "block": TEST_BLOCK},
     }
+    if not config.depth_maps:   # only then: the manifests of datasets with depth stay as they were
+        identity["depth_maps"] = False
+    return identity
 
 
 def _compare(existing: dict, wanted: dict) -> list[str]:
@@ -302,6 +339,9 @@ def prepare_dataset(root: str | os.PathLike, config: RenderConfig, target, rig) 
     if not isinstance(existing, dict):
         raise DatasetError(f"{manifest_path} is not a dataset manifest")
     diffs = _compare(existing, wanted)
+    if existing.get("depth_maps", True) is not wanted.get("depth_maps", True):
+        diffs.append(f"depth_maps: folder has {existing.get('depth_maps', True)!r}, asked for "
+                     f"{wanted.get('depth_maps', True)!r} (--no-depth must match)")
     if diffs:
         raise DatasetError(
             f"{root} holds another dataset ({'; '.join(diffs)}); refusing to overwrite it: use another folder, "
@@ -316,7 +356,7 @@ def prepare_dataset(root: str | os.PathLike, config: RenderConfig, target, rig) 
             save_rig(rig, rig_path, overwrite=False)
         except FileExistsError:
             pass
-    for folder in FRAME_FILES:
+    for folder in frame_folders(config.depth_maps):
         (root / folder).mkdir(exist_ok=True)
     return existing
 
@@ -342,9 +382,10 @@ def shard_indices(count: int, shard: tuple[int, int] = (1, 1)) -> range:
 def collect_labels(root: str | os.PathLike) -> int:
     """Rebuild ``labels.jsonl`` (frame order) from the complete frames' meta files; return its line count."""
     root = Path(root)
+    depth = stores_depth(root)
     lines = []
     for meta in sorted((root / "meta").glob("*.json")):
-        if not frame_complete(root, meta.stem):
+        if not frame_complete(root, meta.stem, depth):
             continue
         text = meta.read_text().strip()
         if text:
@@ -379,7 +420,7 @@ def _render_and_write(task: tuple[str, int]) -> str:
     root, index = task
     w = _WORKER
     frame = render_frame(w["target"], w["camera"], w["sampler"], w["config"].seed, index)
-    write_frame(root, frame)
+    write_frame(root, frame, w["config"].depth_maps)
     return frame.name
 
 
@@ -430,7 +471,7 @@ def render_dataset(
     PoseSampler(camera, target.bounding_radius, config.depth_range)  # fail early on a bad depth range
     root = Path(root)
     prepare_dataset(root, config, target, rig)
-    indices = [i for i in shard_indices(config.count, shard) if not frame_complete(root, frame_name(i))]
+    indices = [i for i in shard_indices(config.count, shard) if not frame_complete(root, frame_name(i), config.depth_maps)]
     skipped = len(shard_indices(config.count, shard)) - len(indices)
     log.info("shard %d/%d: %d frames to render, %d already complete", k, n, len(indices), skipped)
     tasks = [(str(root), i) for i in indices]

@@ -20,7 +20,9 @@ from spacepose.tools.dataset import (
     parse_shard,
     regime_of,
     render_dataset,
+    require_depth,
     split_of,
+    stores_depth,
 )
 from spacepose.tools.targets import TargetError
 
@@ -96,6 +98,59 @@ class TestDeterminism:
         assert splits == {"train": 900, "test": 100}
         regimes = Counter(regime_of(3, i) for i in range(1000))
         assert set(regimes.values()) == {250}
+
+
+class TestNoDepth:
+    """``--no-depth``: the same frames without ``depth/``, recorded in the manifest, kept on resume."""
+
+    def test_same_frames_without_depth_maps(self, dataset, tmp_path):
+        root, _ = dataset
+        other = tmp_path / "nodepth"
+        summary = render_dataset(other, RenderConfig(count=10, size=SIZE, seed=7, depth_maps=False), workers=1)
+        assert summary["rendered"] == 10 and summary["labels"] == 10
+        assert not (other / "depth").exists() and not (other / "depth").is_dir()
+        for folder in FRAME_FILES:
+            if folder == "depth":
+                continue
+            for i in range(10):
+                name = f"{i:06d}{FRAME_FILES[folder]}"
+                assert (other / folder / name).read_bytes() == (root / folder / name).read_bytes(), (folder, name)
+        assert (other / "labels.jsonl").read_text() == (root / "labels.jsonl").read_text()
+        assert json.loads((other / MANIFEST).read_text())["depth_maps"] is False
+        assert "depth_maps" not in json.loads((root / MANIFEST).read_text())   # old manifests unchanged
+        assert stores_depth(root) and not stores_depth(other)
+        require_depth(root)
+        with pytest.raises(DatasetError, match="--no-depth"):
+            require_depth(other)
+        # a frame is complete without its depth map, and resuming renders nothing
+        assert frame_complete(other, "000003", depth_maps=False) and not frame_complete(other, "000003")
+        again = render_dataset(other, RenderConfig(count=10, size=SIZE, seed=7, depth_maps=False), workers=1)
+        assert again["rendered"] == 0 and again["skipped"] == 10 and again["labels"] == 10
+
+    def test_resume_must_match_the_option(self, dataset, tmp_path):
+        root, _ = dataset
+        with pytest.raises(DatasetError, match="depth_maps"):
+            render_dataset(root, RenderConfig(count=10, size=SIZE, seed=7, depth_maps=False), workers=1)
+        other = tmp_path / "nd"
+        render_dataset(other, RenderConfig(count=2, size=SIZE, seed=7, depth_maps=False), workers=1)
+        with pytest.raises(DatasetError, match="depth_maps"):
+            render_dataset(other, RenderConfig(count=2, size=SIZE, seed=7), workers=1)
+        assert not (other / "depth").exists()
+
+    def test_cli_flag(self, tmp_path, capsys):
+        root = tmp_path / "cli_nd"
+        assert main(["render", str(root), "--count", "2", "--size", "160x120", "--seed", "1", "--workers", "1",
+                     "--no-depth"]) == 0
+        assert len((root / "labels.jsonl").read_text().splitlines()) == 2
+        assert not (root / "depth").exists() and len(list((root / "disparity").glob("*.pfm"))) == 2
+
+    def test_photometric_calibration_refuses_a_set_without_depth(self, tmp_path):
+        from spacepose.tools.calibrate_photo import score_frames
+
+        root = tmp_path / "photo_nd"
+        render_dataset(root, RenderConfig(count=2, size=SIZE, seed=7, depth_maps=False), workers=1)
+        with pytest.raises(DatasetError, match="--no-depth"):
+            score_frames(root, None, "train", 1)
 
 
 class TestBadInput:
