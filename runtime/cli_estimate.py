@@ -141,14 +141,17 @@ def draw_overlay(image: np.ndarray, result, bundle, K: np.ndarray) -> np.ndarray
     return out
 
 
-CSV_FIELDS = ["frame", "valid", "status", "confidence", "tx", "ty", "tz", "qw", "qx", "qy", "qz", "total_ms"]
+CSV_FIELDS = ["frame", "valid", "status", "confidence", "tx", "ty", "tz", "qw", "qx", "qy", "qz", "total_ms",
+              "position_valid", "px", "py", "pz"]
 
 
 def csv_row(record: dict) -> list:
     t = record.get("t") or [None] * 3
     q = record.get("q_wxyz") or [None] * 4
+    p = record.get("position") or [None] * 3
     total = sum(record.get("timings_ms", {}).values())
-    return [record["frame"], record["valid"], record["status"], f"{record['confidence']:.4f}", *t, *q, f"{total:.1f}"]
+    return [record["frame"], record["valid"], record["status"], f"{record['confidence']:.4f}", *t, *q, f"{total:.1f}",
+            bool(record.get("position_valid", False)), *p]
 
 
 def bad_input_record(name: str, message: str) -> dict:
@@ -156,7 +159,7 @@ def bad_input_record(name: str, message: str) -> dict:
     nan3 = [None] * 3
     return {"frame": name, "valid": False, "status": "bad_input", "R": [nan3, nan3, nan3], "t": nan3,
             "q_wxyz": [None] * 4, "confidence": 0.0, "timings_ms": {}, "n_points": 0, "roi": None,
-            "tracked": False, "depth_tolerance_m": None, "detail": message}
+            "tracked": False, "depth_tolerance_m": None, "position": nan3, "position_valid": False, "detail": message}
 
 
 def run(args: argparse.Namespace) -> int:

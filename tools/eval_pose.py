@@ -8,6 +8,9 @@ regime and per 10 m distance bin: mean and median e_t / e_R / ADD, mean SPEED sc
 fraction, and the count of valid frames with e_R > 90° ("flips", symmetric-looking targets);
 ``e_R_sym``: e_R to the nearer of the label and its 180° flip about the bundle's ``voting.flip_axis``
 (how good the orientation is up to that near-symmetry; equal to e_R without a flip axis).
+Target position without attitude (``PoseResult.position_valid``): the share of frames with a usable
+position, ``e_pos`` = distance (m) of the reported centre to the labelled one (mean, median, 95th
+percentile), and the share of those within the frame's ``depth_tolerance_m``.
 Also: an error-vs-confidence table (quantile bins of confidence), Fig. 14-style scatter plots
 (e_t and e_R against distance) and Fig. 15-style overlays (projected 3-D box; white = GT, green =
 estimate). ``baseline="classical"`` adds :func:`spacepose.tools.classical_pose.estimate_classical`
@@ -77,6 +80,15 @@ def summarise(rows: Iterable[dict[str, Any]]) -> dict[str, Any]:
         out[f"{key}_mean"] = _nanstat(np.mean, vals)
         out[f"{key}_median"] = _nanstat(np.median, vals)
     out["speed_score"] = _nanstat(np.mean, [r["speed"] for r in ok])
+    pos = [r for r in rows if r.get("position_valid")]
+    e_pos = [r["e_pos"] for r in pos]
+    out["position_valid"] = len(pos)
+    out["position_fraction"] = len(pos) / len(rows) if rows else float("nan")
+    out["e_pos_mean"] = _nanstat(np.mean, e_pos)
+    out["e_pos_median"] = _nanstat(np.median, e_pos)
+    out["e_pos_p95"] = _nanstat(lambda v: np.percentile(v, 95), e_pos)
+    out["e_pos_max"] = _nanstat(np.max, e_pos)
+    out["e_pos_within_tolerance"] = _nanstat(np.mean, [float(r["e_pos"] <= r["depth_tolerance_m"]) for r in pos])
     out["flips"] = sum(1 for r in ok if r["e_R"] > FLIP_DEG)
     statuses: dict[str, int] = {}
     for r in rows:
@@ -194,6 +206,7 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
     from spacepose.metrics import rotation_error_deg
 
     flip_S = flip_matrix(model.voting.flip_axis) if model.voting.flip_axis else np.eye(3)
+    centre = np.asarray(model.centre, dtype=np.float64)
     classical: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, bool]] | None = None
     rect = rectify(rig)
     K = rect.K
@@ -226,6 +239,8 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
         # up to the target's declared near-symmetry: the nearer of the label and its 180° flip
         err["e_R_sym"] = (min(err["e_R"], rotation_error_deg(rec.R @ flip_S, result.R)) if result.valid
                           else float("nan"))
+        centre_true = np.asarray(rec.R, dtype=np.float64) @ centre + np.asarray(rec.t, dtype=np.float64)
+        e_pos = float(np.linalg.norm(np.asarray(result.position) - centre_true)) if result.position_valid else float("nan")
         row = {"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "valid": bool(result.valid),
                "status": result.status, "confidence": float(result.confidence), "wall_ms": wall, **err,
                "flip_margin": float(result.flip_margin), "depth_tolerance_m": float(result.depth_tolerance_m),
@@ -236,6 +251,8 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
                "outline_image_pixels": float(result.outline_image_pixels),
                "polish_deg": float(result.polish_deg), "polish_m": float(result.polish_m),
                "flip_prob": float(result.flip_prob), "decided_by": result.decided_by,
+               "position_valid": bool(result.position_valid), "e_pos": e_pos,
+               "position": np.asarray(result.position).tolist(),
                "R": np.asarray(result.R).tolist(), "t": np.asarray(result.t).tolist()}
         rows.append(row)
         if classical is not None:
@@ -267,7 +284,7 @@ def _fmt(v: Any) -> str:
 def format_tables(report: dict[str, Any]) -> str:
     """Markdown tables: per group (overall, regimes, distance bins) and error vs confidence."""
     cols = ["frames", "valid_fraction", "e_t_mean", "e_t_median", "e_R_mean", "e_R_median", "e_R_sym_median", "add_mean",
-            "speed_score", "flips"]
+            "speed_score", "flips", "position_fraction", "e_pos_mean", "e_pos_median", "e_pos_p95"]
     lines = []
     for name in ("ours", "baseline"):
         block = report.get(name)

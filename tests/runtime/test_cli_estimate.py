@@ -58,8 +58,12 @@ def test_every_frame_gets_a_line(setup, tmp_path, capsys):
     for r in records:
         assert set(r) >= {"frame", "valid", "status", "R", "t", "q_wxyz", "confidence", "timings_ms", "tracked"}
         assert len(r["R"]) == 3 and len(r["t"]) == 3 and len(r["q_wxyz"]) == 4
+    for r in records:   # the target's position: with every valid pose, never on a frame that could not be read
+        assert r["position_valid"] is (r["valid"] or r["status"] == "weak_votes") and len(r["position"]) == 3
     rows = list(csv.reader((tmp_path / "p.csv").open()))
     assert rows[0][:3] == ["frame", "valid", "status"] and len(rows) == 6
+    assert rows[0][-4:] == ["position_valid", "px", "py", "pz"]
+    assert [row[-4] for row in rows[1:]] == [str(r["position_valid"]) for r in records]
     assert sorted(p.name for p in (tmp_path / "ov").iterdir()) == ["000000.png", "000003.png", "000004.png"]
     captured = capsys.readouterr()
     assert "5/5" in captured.err and "2 valid" in captured.out

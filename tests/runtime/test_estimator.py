@@ -283,6 +283,19 @@ def test_the_json_line_carries_the_depth_tolerance_of_a_valid_pose():
     assert PoseResult(valid=False, status="weak_votes", depth_tolerance_m=0.61, **pose).to_dict()[
         "depth_tolerance_m"] is None
     assert PoseResult(valid=True, status="ok", **pose).to_dict()["depth_tolerance_m"] is None   # no registration
+    # a frame with only its position (the flip undecided) carries the tolerance too: it bounds the position
+    line = PoseResult(valid=False, status="weak_votes", depth_tolerance_m=0.61, position=np.array([0.0, 0.1, 20.0]),
+                      position_valid=True, **pose).to_dict()
+    assert line["depth_tolerance_m"] == 0.61 and line["position"] == [0.0, 0.1, 20.0] and line["position_valid"] is True
+
+
+def test_a_valid_pose_reports_its_centre_as_the_position(estimator):
+    left, right = synthetic_pair()
+    res = estimator.estimate(left, right)
+    assert res.valid and res.position_valid
+    np.testing.assert_allclose(res.position, res.R @ estimator.bundle.centre + res.t, atol=1e-12)
+    record = res.to_dict()
+    assert record["position_valid"] is True and len(record["position"]) == 3
 
 
 def test_a_short_baseline_gets_the_tiled_coarse_pass():

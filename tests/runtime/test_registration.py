@@ -251,6 +251,41 @@ def test_estimator_registers_and_reports_an_ambiguous_pose_invalid(tmp_path):
     assert np.isfinite(res.flip_margin) and np.all(np.isnan(res.R))
 
 
+def test_an_ambiguous_frame_still_reports_the_target_position(tmp_path):
+    """The flip turns the target about an axis through its centre: a frame that cannot tell the pose from
+    its flip still knows where the centre is (``position_valid``), with no attitude (``valid`` false)."""
+    left, right = synthetic_pair()
+    bundle = load_bundle(_registration_bundle(tmp_path, {"min_margin": 0.0}))
+    loose = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1).estimate(left, right)
+    assert loose.valid and loose.position_valid
+    np.testing.assert_allclose(loose.position, loose.R @ bundle.centre + loose.t, atol=1e-12)
+    strict = PoseEstimator(paper_rig(640, 480),
+                           bundle=load_bundle(_registration_bundle(tmp_path / "s", {"min_margin": 0.5})), threads=1)
+    res = strict.estimate(left, right)
+    assert res.status == "weak_votes" and not res.valid and res.position_valid
+    assert np.all(np.isnan(res.R)) and np.all(np.isnan(res.t))        # no pose, only the position
+    assert np.linalg.norm(res.position - loose.position) < 0.05        # the same registration, undecided
+    record = res.to_dict("f")
+    assert record["valid"] is False and record["position_valid"] is True
+    assert record["position"] == [float(v) for v in res.position]
+    assert record["depth_tolerance_m"] == pytest.approx(res.depth_tolerance_m) and res.depth_tolerance_m > 0
+    # the flip of the registered pose puts the centre at the same place
+    R_f, t_f = flipped_pose(loose.R, loose.t, bundle.centre, "z")
+    np.testing.assert_allclose(R_f @ bundle.centre + t_f, loose.position, atol=1e-9)
+    # a frame with no target has no position
+    dark = strict.estimate(np.zeros_like(left), np.zeros_like(right))
+    assert not dark.position_valid and dark.to_dict()["position"] == [None, None, None]
+
+
+def test_a_frame_too_few_points_lie_on_the_surface_of_has_no_position(tmp_path):
+    left, right = synthetic_pair()
+    est = PoseEstimator(paper_rig(640, 480), threads=1, bundle=load_bundle(
+        _registration_bundle(tmp_path, {"min_margin": 0.0, "min_inlier_fraction": 1.0})))
+    res = est.estimate(left, right)
+    assert res.status == "fit_residual" and not res.valid and not res.position_valid
+    assert np.all(np.isnan(res.position))
+
+
 def _result(R, t, R_run, t_run):
     from spacepose.registration import RegistrationResult
 

@@ -39,6 +39,20 @@ class TestAggregation:
         assert sym["e_R_sym_median"] == pytest.approx(2.0) and sym["flips"] == 1
         assert np.isnan(s["e_R_sym_median"])   # rows without it (a baseline) give NaN, not an error
 
+    def test_position_without_attitude(self):
+        """Frames with a usable target position (valid or not): their share, e_pos statistics and the share
+        within the frame's depth tolerance; rows without the keys (a baseline) count no position."""
+        rows = [dict(row(), position_valid=True, e_pos=0.1, depth_tolerance_m=0.5),
+                dict(row(valid=False), position_valid=True, e_pos=0.9, depth_tolerance_m=0.5),
+                dict(row(valid=False), position_valid=False, e_pos=float("nan"), depth_tolerance_m=float("nan")),
+                dict(row(valid=False), position_valid=True, e_pos=0.2, depth_tolerance_m=0.5)]
+        s = summarise(rows)
+        assert s["position_valid"] == 3 and s["position_fraction"] == 0.75 and s["valid"] == 1
+        assert s["e_pos_mean"] == pytest.approx(0.4) and s["e_pos_median"] == pytest.approx(0.2)
+        assert s["e_pos_max"] == pytest.approx(0.9) and s["e_pos_within_tolerance"] == pytest.approx(2 / 3)
+        base = summarise([row(), row(valid=False)])
+        assert base["position_valid"] == 0 and np.isnan(base["e_pos_mean"])
+
     def test_confidence_table_highest_first(self):
         rows = [row(conf=c, e_t=1.0 - c) for c in np.linspace(0.1, 0.9, 8)] + [row(valid=False, conf=0.0)]
         table = confidence_table(rows, n_bins=4)
@@ -87,6 +101,8 @@ def test_full_pipeline_with_baseline(tmp_path_factory, tmp_path, monkeypatch, ca
     for f in report["frames"]:
         assert f["status"] in ("ok", "no_target", "too_few_points", "weak_votes", "fit_residual", "out_of_range")
         assert (f["decided_by"] != "") == f["valid"]   # what picked a valid pose from its flip; "" otherwise
+        assert f["position_valid"] or not f["valid"]     # a valid pose always has its position
+        assert np.isfinite(f["e_pos"]) == f["position_valid"]
     assert (out / "fig14_errors_vs_distance.png").is_file() and (out / "pose_eval.md").is_file()
     assert [p.suffix for p in (out / "overlays").iterdir()] == [".jpg"]
     assert "baseline (classical)" in capsys.readouterr().out
