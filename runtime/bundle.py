@@ -542,7 +542,7 @@ def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | No
     if n_surface < 12:
         raise BundleError("bundle.json: registration needs target.surface_points (at least 12)")
     values = _config_fields(RegistrationConfig, section, "registration", zero_ints=("seed",),
-                            zero_numbers=("min_margin", "min_inlier_fraction"))
+                            zero_numbers=("min_margin", "min_inlier_fraction", "position_max_tau_m"))
     if not 0.0 <= values["min_inlier_fraction"] <= 1.0:
         raise BundleError(f"bundle.json: registration.min_inlier_fraction must be in [0, 1], "
                           f"got {values['min_inlier_fraction']!r}")
@@ -550,6 +550,9 @@ def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | No
         raise BundleError(f"bundle.json: registration.min_margin must be in [0, 1), got {values['min_margin']!r}")
     if not 0.0 < values["reach_decay"] <= 1.0:
         raise BundleError(f"bundle.json: registration.reach_decay must be in (0, 1], got {values['reach_decay']!r}")
+    if values["position_max_tau_m"] < 0.0:
+        raise BundleError(f"bundle.json: registration.position_max_tau_m must be >= 0 (0: off), "
+                          f"got {values['position_max_tau_m']!r}")
     return RegistrationConfig(**values)
 
 

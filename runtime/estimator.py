@@ -124,7 +124,9 @@ class PoseResult:
             place. ``position`` is then the centre of the outline stage's best fit when that fits within
             ``silhouette.max_chamfer_px``, else of the registered pose. A navigation filter can use the
             relative position on such frames without the attitude (``valid`` stays false: the attitude is
-            unknown up to the flip). Accuracy: the model card, "Target position without attitude".
+            unknown up to the flip). Only where the frame's ``depth_tolerance_m`` is at most the bundle's
+            ``registration.position_max_tau_m`` (0, the default: only with a valid pose). Accuracy: the
+            model card, "Target position without attitude".
             In the JSON line since session 25.
         tracked: the pose was decided by the prior, the last valid pose at most ``prior_max_gap``
             frames back (registration with ``use_prior``: the frame alone could not tell the pose
@@ -599,8 +601,11 @@ class PoseEstimator:
             return _stage_invalid(stage, "out_of_range", factors), (
                 f"registered target distance {distance:.1f} m outside {lo:.1f}-{hi:.1f} m")
         R, t, fallback = reg.R, reg.t, None
-        # the target's centre, the same for the pose and its flip (PoseResult.position_valid)
-        factors.update(zip(_POSITION_KEYS, (float(v) for v in reg.R @ bundle.centre + reg.t)))
+        # the target's centre, the same for the pose and its flip, where the depth is fine enough to trust it
+        # (PoseResult.position_valid; registration.position_max_tau_m, 0: not without a valid pose)
+        position_ok = 0.0 < config.position_max_tau_m and reg.tau_m <= config.position_max_tau_m
+        if position_ok:
+            factors.update(zip(_POSITION_KEYS, (float(v) for v in reg.R @ bundle.centre + reg.t)))
         conclusive = margin >= config.min_margin and reg.tau_m <= config.max_tau_m
         outline = None
         if self._outline_points is not None and stereo.window is not None:
@@ -612,7 +617,7 @@ class PoseEstimator:
                                outline_image_background=outline.vote.background_lit,
                                outline_image_pixels=float(outline.vote.pixels))
         sil = bundle.silhouette
-        if (outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px
+        if (position_ok and outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px
                 and np.all(np.isfinite(outline.best.R)) and np.all(np.isfinite(outline.best.t))):
             # the outline's winner, when it fits: its size pins the range better than the stereo points (a
             # pose or its flip, the centre is the same); on the 90 unseen 1280x960 frames mean e_pos 0.30 -> 0.28 m

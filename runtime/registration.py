@@ -61,6 +61,11 @@ class RegistrationConfig:
         frame whose margin is too small is still decided when exactly one of the best pose and its
         runner-up lies within this rotation and translation of that prior (:func:`select_with_prior`):
         the target cannot have turned half round between two frames.
+    position_max_tau_m: a frame registered but left undecided between the pose and its flip
+        (``weak_votes``) still reports the target centre's position (``PoseResult.position_valid``)
+        when its depth tolerance ``tau`` is at most this; 0: only a valid pose reports a position.
+        The flip leaves the centre in place, so the position does not depend on the flip; ``tau``
+        bounds its error (session 25: model card, "Target position without attitude").
     """
 
     starts: int = 48
@@ -81,6 +86,7 @@ class RegistrationConfig:
     max_tau_m: float = 1e9
     track_max_deg: float = 20.0
     track_max_m: float = 1.0
+    position_max_tau_m: float = 0.0
 
 
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:

@@ -216,6 +216,7 @@ def test_bundle_registration_section(tmp_path):
     ({"min_margin": 1.5}, "min_margin"),
     ({"min_inlier_fraction": -0.1}, "min_inlier_fraction"),
     ({"reach_decay": 1.5}, "reach_decay"),
+    ({"position_max_tau_m": -1.0}, "position_max_tau_m"),
     ([], "must be an object"),
 ])
 def test_bundle_refuses_bad_registration_sections(tmp_path, section, match):
@@ -259,10 +260,10 @@ def test_an_ambiguous_frame_still_reports_the_target_position(tmp_path):
     loose = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1).estimate(left, right)
     assert loose.valid and loose.position_valid
     np.testing.assert_allclose(loose.position, loose.R @ bundle.centre + loose.t, atol=1e-12)
-    strict = PoseEstimator(paper_rig(640, 480),
-                           bundle=load_bundle(_registration_bundle(tmp_path / "s", {"min_margin": 0.5})), threads=1)
+    strict = PoseEstimator(paper_rig(640, 480), threads=1, bundle=load_bundle(
+        _registration_bundle(tmp_path / "s", {"min_margin": 0.5, "position_max_tau_m": 1.0})))
     res = strict.estimate(left, right)
-    assert res.status == "weak_votes" and not res.valid and res.position_valid
+    assert res.status == "weak_votes" and not res.valid and res.position_valid and res.depth_tolerance_m <= 1.0
     assert np.all(np.isnan(res.R)) and np.all(np.isnan(res.t))        # no pose, only the position
     assert np.linalg.norm(res.position - loose.position) < 0.05        # the same registration, undecided
     record = res.to_dict("f")
@@ -275,12 +276,20 @@ def test_an_ambiguous_frame_still_reports_the_target_position(tmp_path):
     # a frame with no target has no position
     dark = strict.estimate(np.zeros_like(left), np.zeros_like(right))
     assert not dark.position_valid and dark.to_dict()["position"] == [None, None, None]
+    # the gate: a depth tolerance above position_max_tau_m, or the gate off (0, the default), gives no position
+    for name, section in (("tight", {"min_margin": 0.5, "position_max_tau_m": 0.5 * res.depth_tolerance_m}),
+                          ("off", {"min_margin": 0.5})):
+        est = PoseEstimator(paper_rig(640, 480), threads=1, bundle=load_bundle(_registration_bundle(tmp_path / name, section)))
+        other = est.estimate(left, right)
+        assert other.status == "weak_votes" and not other.position_valid and np.all(np.isnan(other.position))
+        assert other.to_dict()["depth_tolerance_m"] is None
+    assert RegistrationConfig().position_max_tau_m == 0.0
 
 
 def test_a_frame_too_few_points_lie_on_the_surface_of_has_no_position(tmp_path):
     left, right = synthetic_pair()
     est = PoseEstimator(paper_rig(640, 480), threads=1, bundle=load_bundle(
-        _registration_bundle(tmp_path, {"min_margin": 0.0, "min_inlier_fraction": 1.0})))
+        _registration_bundle(tmp_path, {"min_margin": 0.0, "min_inlier_fraction": 1.0, "position_max_tau_m": 9.0})))
     res = est.estimate(left, right)
     assert res.status == "fit_residual" and not res.valid and not res.position_valid
     assert np.all(np.isnan(res.position))

@@ -1,0 +1,81 @@
+"""Session 25: the target position without attitude, measured by the commands of ``plan.txt``.
+
+    python reports/position_s25/summarize.py [RUNS]
+
+reads ``RUNS/{test_final,unseen_final,fresh640_a,fresh640_b,fresh1280}/pose_eval.json`` (default
+``runs/s25``) when they exist and writes the compact rows beside this file (``rows.json.gz``); else it reads
+those committed rows. Prints, per set: frames, valid poses, position-valid frames, e_pos mean / median / p95 /
+max, the share within the frame's ``depth_tolerance_m``, per regime and per 10 m distance bin; then the
+verdict of the plan's rule on the two fresh sets.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SETS = {"test split (300, 640x480)": ["test_final"], "unseen (90, 1280x960)": ["unseen_final"],
+        "fresh s25p (900, 640x480, seed 2501)": ["fresh640_a", "fresh640_b"],
+        "fresh s25p (135, 1280x960, seed 2502)": ["fresh1280"]}
+FRESH = ("fresh s25p (900, 640x480, seed 2501)", "fresh s25p (135, 1280x960, seed 2502)")
+KEYS = ("frame", "regime", "distance", "valid", "status", "position_valid", "e_pos", "depth_tolerance_m", "e_t")
+
+
+def load(runs: Path) -> dict[str, list[dict]]:
+    out = {}
+    for name, parts in SETS.items():
+        files = [runs / part / "pose_eval.json" for part in parts]
+        if not all(f.is_file() for f in files):
+            break
+        out[name] = [{k: r[k] for k in KEYS} for f in files for r in json.loads(f.read_text())["frames"]]
+    else:
+        with gzip.open(HERE / "rows.json.gz", "wt") as fh:
+            json.dump(out, fh)
+        return out
+    with gzip.open(HERE / "rows.json.gz", "rt") as fh:
+        return json.load(fh)
+
+
+def stats(rows: list[dict]) -> str:
+    pos = [r for r in rows if r["position_valid"]]
+    if not pos:
+        return f"{len(rows):>5} {sum(r['valid'] for r in rows):>5} {0:>5}"
+    e = np.array([r["e_pos"] for r in pos])
+    tau = np.array([r["depth_tolerance_m"] for r in pos])
+    return (f"{len(rows):>5} {sum(r['valid'] for r in rows):>5} {len(pos):>5} {100 * len(pos) / len(rows):>5.1f}% "
+            f"{e.mean():>6.3f} {np.median(e):>6.3f} {np.percentile(e, 95):>6.3f} {e.max():>6.2f} "
+            f"{100 * np.mean(e <= tau):>6.1f}%")
+
+
+def main() -> int:
+    runs = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("runs/s25")
+    data = load(runs)
+    head = f"{'group':<34}{'frames':>5} {'valid':>5} {'pos':>5} {'share':>6} {'mean':>6} {'median':>6} {'p95':>6} {'max':>6} {'<=tau':>7}"
+    for name, rows in data.items():
+        print(f"\n{name}  (e_pos in m over position-valid frames)\n{head}")
+        print(f"{'all':<34}" + stats(rows))
+        print(f"{'  only weak_votes (no attitude)':<34}" + stats([r for r in rows if r["status"] == "weak_votes"]))
+        for regime in ("sun", "albedo", "penumbra", "mixed"):
+            print(f"{'  regime ' + regime:<34}" + stats([r for r in rows if r["regime"] == regime]))
+        for lo in (10, 20, 30, 40):
+            print(f"{f'  distance {lo}-{lo + 10} m':<34}" + stats([r for r in rows if lo <= r["distance"] < lo + 10]))
+    print("\nrule (plan.txt) on the fresh sets: e_pos <= depth_tolerance_m on >= 95 % of position-valid frames, none > 5 m")
+    ok = True
+    for name in FRESH:
+        pos = [r for r in data[name] if r["position_valid"]]
+        within = float(np.mean([r["e_pos"] <= r["depth_tolerance_m"] for r in pos]))
+        worst = max(r["e_pos"] for r in pos)
+        met = within >= 0.95 and worst <= 5.0
+        ok &= met
+        print(f"  {name}: within {100 * within:.1f} %, max {worst:.2f} m -> {'met' if met else 'NOT met'}")
+    print("verdict:", "met, the feature stays" if ok else "NOT met, withdraw the feature")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
