@@ -328,6 +328,12 @@ class PoseEstimator:
             0 (see the model card).
         refine: point-to-plane ICP against the stereo points (needs ``surface_points`` in the bundle).
         seed: seed of the point sampling and MeanShift seeds (results are deterministic).
+        position_window: with ``use_prior``, a frame right after one that reported only a position
+            (``position_valid`` without a valid pose) takes its stereo window from that position: the
+            target's bounding sphere about it, widened by that frame's ``depth_tolerance_m`` (skips the
+            coarse pass; a window that loses the target is looked for again with it). It never decides a
+            pose: the prior stays the last valid pose. Off by default (session 25: model card, "Target
+            position without attitude").
 
     Raises:
         CalibrationError: unreadable calibration. BundleError: unusable bundle, or one that does not
@@ -336,7 +342,7 @@ class PoseEstimator:
 
     def __init__(self, calib: str | os.PathLike | Any, bundle: str | os.PathLike | ModelBundle | None = None,
                  threads: int = 2, use_prior: bool = True, refine: bool = False, seed: int = 0,
-                 prior_max_gap: int = PRIOR_MAX_GAP) -> None:
+                 prior_max_gap: int = PRIOR_MAX_GAP, position_window: bool = False) -> None:
         from .calibration.rectify import rectify
         from .calibration.rig import StereoRig, load_rig
         from .onnx_session import make_session
@@ -394,22 +400,30 @@ class PoseEstimator:
         self._lock = threading.Lock()
         self._prior: PoseResult | None = None   # the last valid pose (the prior) ...
         self._prior_gap = 0                      # ... and how many frames since it
+        self.position_window = bool(position_window)
+        self._last_position: tuple[np.ndarray, float] | None = None   # the last frame's position-only result
 
     # ------------------------------------------------------------------ prior
     def reset(self) -> None:
         """Forget the previous pose (the next frame runs the coarse stereo pass)."""
         with self._lock:
             self._prior, self._prior_gap = None, 0
+            self._last_position = None
 
     def _roi_hint(self):
         from .stereo_stage import RoiHint
 
         prior = self._valid_prior(max_gap=0)  # a window only from the frame right before (see __init__)
-        if prior is None:
-            return None
-        centre = prior[0] @ self.bundle.centre + prior[1]
-        z = float(centre[2])
         r = self.bundle.radius
+        if prior is not None:
+            centre = prior[0] @ self.bundle.centre + prior[1]
+        else:
+            with self._lock:
+                last = self._last_position if self.position_window and self.use_prior else None
+            if last is None:
+                return None
+            centre, r = last[0], r + last[1]   # the position is known to its depth tolerance
+        z = float(centre[2])
         if z - r <= 0.0:
             return None
         uv = self.K @ (centre / z)
@@ -492,6 +506,9 @@ class PoseEstimator:
         if status == "bad_input":  # a bad frame says nothing about where the target is: the prior stays as it was
             return result
         with self._lock:
+            tau = result.depth_tolerance_m
+            self._last_position = ((result.position.copy(), float(tau))
+                                   if position_valid and not valid and math.isfinite(tau) else None)
             if valid:
                 self._prior, self._prior_gap = result, 0
             elif factors.get("prior_conflict"):  # decided, but half turned from the prior: trust neither

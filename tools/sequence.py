@@ -93,9 +93,9 @@ def _longest_run(flags: list[bool]) -> int:
 
 
 def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, threads: int = 2,
-                      prior_max_gap: int | None = None) -> dict[str, Any]:
+                      prior_max_gap: int | None = None, position_window: bool = False) -> dict[str, Any]:
     """Run the estimator over the sequence in order with ``use_prior`` (and ``prior_max_gap``, default
-    the estimator's); rows and a summary."""
+    the estimator's; ``position_window``, :class:`spacepose.estimator.PoseEstimator`); rows and a summary."""
     from spacepose.calibration.rig import load_rig
     from spacepose.estimator import PoseEstimator
     from spacepose.imageio import read_image
@@ -105,6 +105,8 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
     root = Path(folder)
     records = read_pose_labels(root)
     extra = {} if prior_max_gap is None else {"prior_max_gap": int(prior_max_gap)}
+    if position_window:
+        extra["position_window"] = True
     est = PoseEstimator(load_rig(root / "rig.yaml"), bundle=bundle, threads=threads, use_prior=True, **extra)
     rows = []
     for rec in records:
@@ -115,6 +117,7 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
                "e_R": rotation_error_deg(rec.R, res.R) if res.valid else float("nan"),
                "outline_chamfer_px": float(res.outline_chamfer_px), "outline_margin_px": float(res.outline_margin_px),
                "outline_image_score": float(res.outline_image_score), "decided_by": res.decided_by,
+               "position_valid": bool(res.position_valid), "stereo_ms": float(res.timings_ms.get("stereo", float("nan"))),
                "detail": res.detail}
         rows.append(row)
     valid = [r for r in rows if r["valid"]]
@@ -148,6 +151,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     e.add_argument("--json", type=Path, default=None)
     e.add_argument("--prior-max-gap", type=int, default=None,
                    help="frames a valid pose stays the prior without another (default: the estimator's)")
+    e.add_argument("--position-window", action="store_true",
+                   help="take the next frame's window from a position-only frame too (PoseEstimator position_window)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     if args.cmd == "render":
@@ -159,7 +164,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         render_sequence(args.out, args.frames, args.distance, args.rate, args.regime, args.seed, (w, h), rig)
         print(f"wrote {args.frames} frames to {args.out}")
         return 0
-    report = evaluate_sequence(args.folder, args.bundle, args.threads, args.prior_max_gap)
+    report = evaluate_sequence(args.folder, args.bundle, args.threads, args.prior_max_gap, args.position_window)
     print("frame   status        tracked  e_t m   e_R deg")
     for row in report["frames"]:
         print(f"{row['frame']}  {row['status']:<12}  {str(row['tracked']):<7}  "

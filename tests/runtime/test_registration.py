@@ -286,6 +286,41 @@ def test_an_ambiguous_frame_still_reports_the_target_position(tmp_path):
     assert RegistrationConfig().position_max_tau_m == 0.0
 
 
+def test_position_window_places_the_next_window_after_a_position_only_frame(tmp_path, monkeypatch):
+    """With ``position_window`` a frame after a position-only one skips the coarse pass (its window: the bounding
+    sphere about the position, widened by the tolerance); off, or after a frame without a position, it does not."""
+    left, right = synthetic_pair()
+    bundle = load_bundle(_registration_bundle(tmp_path, {"min_margin": 0.5, "position_max_tau_m": 1.0}))
+    on = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, position_window=True)
+    off = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1)
+    for est in (on, off):
+        first = est.estimate(left, right)
+        assert first.status == "weak_votes" and first.position_valid and est._valid_prior() is None
+    hint = on._roi_hint()
+    assert hint is not None and off._roi_hint() is None
+    uv = on.K @ (first.position / first.position[2])
+    x0, y0, x1, y1 = hint.bbox
+    assert x0 < uv[0] < x1 and y0 < uv[1] < y1
+    fb = on.focal_px * on.baseline_m
+    assert hint.d_min < fb / first.position[2] < hint.d_max
+    # wider than a valid pose's window by the tolerance
+    r = bundle.radius + first.depth_tolerance_m
+    assert hint.d_max == pytest.approx(fb / (first.position[2] - r))
+    calls = []
+    real = on.stereo.match
+    monkeypatch.setattr(on.stereo, "match", lambda l, r, roi_hint=None: calls.append(roi_hint) or real(l, r, roi_hint=roi_hint))
+    second = on.estimate(left, right)
+    assert calls[0] is not None and second.position_valid                  # the window came from the position
+    on.estimate(np.zeros_like(left), np.zeros_like(right))                  # an eclipse: no position ...
+    assert on._roi_hint() is None                                            # ... so no window from it
+    on.estimate(left, right)
+    on.reset()
+    assert on._roi_hint() is None
+    no_prior = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, position_window=True, use_prior=False)
+    no_prior.estimate(left, right)
+    assert no_prior._roi_hint() is None
+
+
 def test_a_frame_too_few_points_lie_on_the_surface_of_has_no_position(tmp_path):
     left, right = synthetic_pair()
     est = PoseEstimator(paper_rig(640, 480), threads=1, bundle=load_bundle(
