@@ -332,8 +332,9 @@ class PoseEstimator:
             (``position_valid`` without a valid pose) takes its stereo window from that position: the
             target's bounding sphere about it, widened by that frame's ``depth_tolerance_m`` (skips the
             coarse pass; a window that loses the target is looked for again with it). It never decides a
-            pose: the prior stays the last valid pose. Off by default (session 25: model card, "Target
-            position without attitude").
+            pose: the prior stays the last valid pose. Off by default: on 13 fresh sequences it gave 178
+            valid poses (18 off by > 20° or 0.5 m, one > 90° off) against 238 (26, none) without it (session
+            25, ``reports/position_s25/judge3.py``).
 
     Raises:
         CalibrationError: unreadable calibration. BundleError: unusable bundle, or one that does not
