@@ -176,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     if args.overlay is not None:
         args.overlay.mkdir(parents=True, exist_ok=True)
     csv_file = None
-    n_valid = 0
+    n_valid = n_position = 0
     progress = Progress(len(names))
     try:
         with open(args.out, "w", encoding="utf-8") as out:
@@ -194,6 +194,7 @@ def run(args: argparse.Namespace) -> int:
                     result = estimator.estimate(*pair)
                     record = result.to_dict(name)
                 n_valid += int(record["valid"])
+                n_position += int(record["position_valid"])
                 out.write(json.dumps(record) + "\n")
                 out.flush()
                 if writer is not None:
@@ -207,5 +208,6 @@ def run(args: argparse.Namespace) -> int:
         progress.close()
         if csv_file is not None:
             csv_file.close()
-    print(f"{len(names)} frames, {n_valid} valid poses -> {args.out}")
+    print(f"{len(names)} frames, {n_valid} valid poses, {n_position} target positions (with or without a pose) "
+          f"-> {args.out}")
     return 0

@@ -123,6 +123,7 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
     valid = [r for r in rows if r["valid"]]
     first = next((i for i, r in enumerate(rows) if r["valid"]), None)
     summary = {"frames": len(rows), "valid": len(valid), "tracked": sum(r["tracked"] for r in rows),
+               "position_valid": sum(r["position_valid"] for r in rows),
                "flips": sum(r["e_R"] > 90.0 for r in valid), "first_valid": first,
                "longest_valid_run": _longest_run([r["valid"] for r in rows]),
                "e_t_mean": float(np.mean([r["e_t"] for r in valid])) if valid else float("nan"),

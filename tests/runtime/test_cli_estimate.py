@@ -68,6 +68,7 @@ def test_every_frame_gets_a_line(setup, tmp_path, capsys):
     assert sorted(p.name for p in (tmp_path / "ov").iterdir()) == ["000000.png", "000003.png", "000004.png"]
     captured = capsys.readouterr()
     assert "5/5" in captured.err and "2 valid" in captured.out
+    assert f"{sum(r['position_valid'] for r in records)} target positions" in captured.out
 
 
 def test_refuses_to_overwrite(setup, tmp_path, capsys):
