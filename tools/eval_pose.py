@@ -10,7 +10,8 @@ fraction, and the count of valid frames with e_R > 90° ("flips", symmetric-look
 (how good the orientation is up to that near-symmetry; equal to e_R without a flip axis).
 Target position without attitude (``PoseResult.position_valid``): the share of frames with a usable
 position, ``e_pos`` = distance (m) of the reported centre to the labelled one (mean, median, 95th
-percentile), and the share of those within the frame's ``depth_tolerance_m``.
+percentile), the share of those within the frame's ``depth_tolerance_m``, and ``e_pos_los``: the signed part of the
+error along the line of sight to the labelled centre (positive: too far; its mean is the range bias).
 Also: an error-vs-confidence table (quantile bins of confidence), Fig. 14-style scatter plots
 (e_t and e_R against distance) and Fig. 15-style overlays (projected 3-D box; white = GT, green =
 estimate). ``baseline="classical"`` adds :func:`spacepose.tools.classical_pose.estimate_classical`
@@ -89,6 +90,7 @@ def summarise(rows: Iterable[dict[str, Any]]) -> dict[str, Any]:
     out["e_pos_p95"] = _nanstat(lambda v: np.percentile(v, 95), e_pos)
     out["e_pos_max"] = _nanstat(np.max, e_pos)
     out["e_pos_within_tolerance"] = _nanstat(np.mean, [float(r["e_pos"] <= r["depth_tolerance_m"]) for r in pos])
+    out["e_pos_los_mean"] = _nanstat(np.mean, [r["e_pos_los"] for r in pos if "e_pos_los" in r])
     out["flips"] = sum(1 for r in ok if r["e_R"] > FLIP_DEG)
     statuses: dict[str, int] = {}
     for r in rows:
@@ -241,6 +243,8 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
                           else float("nan"))
         centre_true = np.asarray(rec.R, dtype=np.float64) @ centre + np.asarray(rec.t, dtype=np.float64)
         e_pos = float(np.linalg.norm(np.asarray(result.position) - centre_true)) if result.position_valid else float("nan")
+        e_pos_los = (float((np.asarray(result.position) - centre_true) @ centre_true / np.linalg.norm(centre_true))
+                     if result.position_valid else float("nan"))
         row = {"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "valid": bool(result.valid),
                "status": result.status, "confidence": float(result.confidence), "wall_ms": wall, **err,
                "flip_margin": float(result.flip_margin), "depth_tolerance_m": float(result.depth_tolerance_m),
@@ -251,7 +255,7 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
                "outline_image_pixels": float(result.outline_image_pixels),
                "polish_deg": float(result.polish_deg), "polish_m": float(result.polish_m),
                "flip_prob": float(result.flip_prob), "decided_by": result.decided_by,
-               "position_valid": bool(result.position_valid), "e_pos": e_pos,
+               "position_valid": bool(result.position_valid), "e_pos": e_pos, "e_pos_los": e_pos_los,
                "position": np.asarray(result.position).tolist(),
                "R": np.asarray(result.R).tolist(), "t": np.asarray(result.t).tolist()}
         rows.append(row)

@@ -42,14 +42,16 @@ class TestAggregation:
     def test_position_without_attitude(self):
         """Frames with a usable target position (valid or not): their share, e_pos statistics and the share
         within the frame's depth tolerance; rows without the keys (a baseline) count no position."""
-        rows = [dict(row(), position_valid=True, e_pos=0.1, depth_tolerance_m=0.5),
-                dict(row(valid=False), position_valid=True, e_pos=0.9, depth_tolerance_m=0.5),
-                dict(row(valid=False), position_valid=False, e_pos=float("nan"), depth_tolerance_m=float("nan")),
-                dict(row(valid=False), position_valid=True, e_pos=0.2, depth_tolerance_m=0.5)]
+        rows = [dict(row(), position_valid=True, e_pos=0.1, e_pos_los=0.1, depth_tolerance_m=0.5),
+                dict(row(valid=False), position_valid=True, e_pos=0.9, e_pos_los=-0.3, depth_tolerance_m=0.5),
+                dict(row(valid=False), position_valid=False, e_pos=float("nan"), e_pos_los=float("nan"),
+                     depth_tolerance_m=float("nan")),
+                dict(row(valid=False), position_valid=True, e_pos=0.2, e_pos_los=0.05, depth_tolerance_m=0.5)]
         s = summarise(rows)
         assert s["position_valid"] == 3 and s["position_fraction"] == 0.75 and s["valid"] == 1
         assert s["e_pos_mean"] == pytest.approx(0.4) and s["e_pos_median"] == pytest.approx(0.2)
         assert s["e_pos_max"] == pytest.approx(0.9) and s["e_pos_within_tolerance"] == pytest.approx(2 / 3)
+        assert s["e_pos_los_mean"] == pytest.approx(-0.05)   # the range bias
         base = summarise([row(), row(valid=False)])
         assert base["position_valid"] == 0 and np.isnan(base["e_pos_mean"])
 
@@ -103,6 +105,7 @@ def test_full_pipeline_with_baseline(tmp_path_factory, tmp_path, monkeypatch, ca
         assert (f["decided_by"] != "") == f["valid"]   # what picked a valid pose from its flip; "" otherwise
         assert f["position_valid"] or not f["valid"]     # a valid pose always has its position
         assert np.isfinite(f["e_pos"]) == f["position_valid"]
+        assert np.isfinite(f["e_pos_los"]) == f["position_valid"] and not abs(f["e_pos_los"]) > f["e_pos"] + 1e-9
     assert (out / "fig14_errors_vs_distance.png").is_file() and (out / "pose_eval.md").is_file()
     assert [p.suffix for p in (out / "overlays").iterdir()] == [".jpg"]
     assert "baseline (classical)" in capsys.readouterr().out
