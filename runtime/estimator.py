@@ -619,11 +619,6 @@ class PoseEstimator:
             return _stage_invalid(stage, "out_of_range", factors), (
                 f"registered target distance {distance:.1f} m outside {lo:.1f}-{hi:.1f} m")
         R, t, fallback = reg.R, reg.t, None
-        # the target's centre, the same for the pose and its flip, where the depth is fine enough to trust it
-        # (PoseResult.position_valid; registration.position_max_tau_m, 0: not without a valid pose)
-        position_ok = 0.0 < config.position_max_tau_m and reg.tau_m <= config.position_max_tau_m
-        if position_ok:
-            factors.update(zip(_POSITION_KEYS, (float(v) for v in reg.R @ bundle.centre + reg.t)))
         conclusive = margin >= config.min_margin and reg.tau_m <= config.max_tau_m
         outline = None
         if self._outline_points is not None and stereo.window is not None:
@@ -635,11 +630,15 @@ class PoseEstimator:
                                outline_image_background=outline.vote.background_lit,
                                outline_image_pixels=float(outline.vote.pixels))
         sil = bundle.silhouette
-        if (position_ok and outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px
-                and np.all(np.isfinite(outline.best.R)) and np.all(np.isfinite(outline.best.t))):
-            # the outline's winner, when it fits: its size pins the range better than the stereo points (a
-            # pose or its flip, the centre is the same); on the 90 unseen 1280x960 frames mean e_pos 0.30 -> 0.28 m
-            factors.update(zip(_POSITION_KEYS, (float(v) for v in outline.best.R @ bundle.centre + outline.best.t)))
+        if 0.0 < config.position_max_tau_m and reg.tau_m <= config.position_max_tau_m:
+            # the target's centre, the same for the pose and its flip, where the depth is fine enough to trust it
+            # (PoseResult.position_valid; registration.position_max_tau_m, 0: not without a valid pose). From the
+            # outline's winner when it fits: its size pins the range better than the stereo points (on the 90
+            # unseen 1280x960 frames mean e_pos 0.30 -> 0.28 m); else from the registered pose
+            fits = (outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px
+                    and np.all(np.isfinite(outline.best.R)) and np.all(np.isfinite(outline.best.t)))
+            R_c, t_c = (outline.best.R, outline.best.t) if fits else (reg.R, reg.t)
+            factors.update(zip(_POSITION_KEYS, (float(v) for v in R_c @ bundle.centre + t_c)))
         flip_p = self._flip_probability(outline, stereo, left_r, timer)
         if flip_p is not None:
             factors["flip_prob"] = flip_p

@@ -242,9 +242,9 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
         err["e_R_sym"] = (min(err["e_R"], rotation_error_deg(rec.R @ flip_S, result.R)) if result.valid
                           else float("nan"))
         centre_true = np.asarray(rec.R, dtype=np.float64) @ centre + np.asarray(rec.t, dtype=np.float64)
-        e_pos = float(np.linalg.norm(np.asarray(result.position) - centre_true)) if result.position_valid else float("nan")
-        e_pos_los = (float((np.asarray(result.position) - centre_true) @ centre_true / np.linalg.norm(centre_true))
-                     if result.position_valid else float("nan"))
+        miss = np.asarray(result.position) - centre_true if result.position_valid else np.full(3, np.nan)
+        e_pos = float(np.linalg.norm(miss))
+        e_pos_los = float(miss @ centre_true / np.linalg.norm(centre_true))   # signed, along the line of sight
         row = {"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "valid": bool(result.valid),
                "status": result.status, "confidence": float(result.confidence), "wall_ms": wall, **err,
                "flip_margin": float(result.flip_margin), "depth_tolerance_m": float(result.depth_tolerance_m),
