@@ -12,12 +12,11 @@ range part of the error along the line of sight (mean: the bias; mean absolute) 
 
 from __future__ import annotations
 
-import gzip
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
+from _rows import compact_rows
 
 HERE = Path(__file__).resolve().parent
 PARTS = {"640x480 (seed 2503)": ["q640_a_los", "q640_b_los"], "1280x960 (seed 2504)": ["q1280_los"]}
@@ -28,14 +27,7 @@ MAX_CHAMFER_PX = 1.5   # the shipped silhouette.max_chamfer_px
 
 def load(runs: Path) -> dict[str, list[dict]]:
     files = {name: [runs / p / "pose_eval.json" for p in parts] for name, parts in PARTS.items()}
-    if all(f.is_file() for fs in files.values() for f in fs):
-        data = {name: [{k: r[k] for k in KEYS} for f in fs for r in json.loads(f.read_text())["frames"]
-                       if r["position_valid"]] for name, fs in files.items()}
-        with gzip.open(HERE / "error_rows.json.gz", "wt") as fh:
-            json.dump(data, fh)
-        return data
-    with gzip.open(HERE / "error_rows.json.gz", "rt") as fh:
-        return json.load(fh)
+    return compact_rows(files, HERE / "error_rows.json.gz", KEYS, keep=lambda r: r["position_valid"])
 
 
 def source(r: dict) -> str:

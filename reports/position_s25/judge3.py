@@ -9,12 +9,11 @@ and the mean stereo-stage time, then the verdict of the plan's rule.
 
 from __future__ import annotations
 
-import gzip
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
+from _rows import compact_rows
 
 HERE = Path(__file__).resolve().parent
 SEQS = [f"seq_m{k}" for k in range(1, 14)]
@@ -23,15 +22,9 @@ KEYS = ("frame", "valid", "status", "tracked", "e_t", "e_R", "position_valid", "
 
 
 def load(runs: Path) -> dict[str, dict[str, list[dict]]]:
-    files = {b: {s: runs / "seq" / b / f"{s}.json" for s in SEQS} for b in ("S", "C")}
-    if all(f.is_file() for per in files.values() for f in per.values()):
-        data = {b: {s: [{k: r[k] for k in KEYS} for r in json.loads(f.read_text())["frames"]] for s, f in per.items()}
-                for b, per in files.items()}
-        with gzip.open(HERE / "seq_rows.json.gz", "wt") as fh:
-            json.dump(data, fh)
-        return data
-    with gzip.open(HERE / "seq_rows.json.gz", "rt") as fh:
-        return json.load(fh)
+    files = {f"{b}/{s}": [runs / "seq" / b / f"{s}.json"] for b in ("S", "C") for s in SEQS}
+    rows = compact_rows(files, HERE / "seq_rows.json.gz", KEYS)
+    return {b: {s: rows[f"{b}/{s}"] for s in SEQS} for b in ("S", "C")}
 
 
 def wrong(r: dict) -> bool:

@@ -4,19 +4,19 @@
 
 Round 1 (``plan.txt``) reads ``RUNS/{test_final,unseen_final,fresh640_a,fresh640_b,fresh1280}/pose_eval.json``
 (default ``runs/s25``) when they exist and writes the compact rows beside this file (``rows.json.gz``); else it
-reads those committed rows. Round 2 (``plan2.txt``): ``RUNS/{q640_a,q640_b,q1280}``, ``rows2.json.gz``. Prints, per set: frames, valid poses, position-valid frames, e_pos mean / median / p95 /
-max, the share within the frame's ``depth_tolerance_m``, per regime and per 10 m distance bin; then the
-verdict of the plan's rule on the two fresh sets.
+reads those committed rows. Round 2 (``plan2.txt``): ``RUNS/{q640_a,q640_b,q1280}``, ``rows2.json.gz``.
+Prints, per set: frames, valid poses, position-valid frames, e_pos mean / median / p95 / max, the share within
+the frame's ``depth_tolerance_m``, per regime and per 10 m distance bin; then the verdict of the plan's rule on
+the two fresh sets.
 """
 
 from __future__ import annotations
 
-import gzip
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
+from _rows import compact_rows
 
 HERE = Path(__file__).resolve().parent
 SETS = {"test split (300, 640x480)": ["test_final"], "unseen (90, 1280x960)": ["unseen_final"],
@@ -30,18 +30,8 @@ KEYS = ("frame", "regime", "distance", "valid", "status", "position_valid", "e_p
 
 
 def load(runs: Path, sets: dict[str, list[str]], rows_file: str) -> dict[str, list[dict]]:
-    out = {}
-    for name, parts in sets.items():
-        files = [runs / part / "pose_eval.json" for part in parts]
-        if not all(f.is_file() for f in files):
-            break
-        out[name] = [{k: r[k] for k in KEYS} for f in files for r in json.loads(f.read_text())["frames"]]
-    else:
-        with gzip.open(HERE / rows_file, "wt") as fh:
-            json.dump(out, fh)
-        return out
-    with gzip.open(HERE / rows_file, "rt") as fh:
-        return json.load(fh)
+    files = {name: [runs / part / "pose_eval.json" for part in parts] for name, parts in sets.items()}
+    return compact_rows(files, HERE / rows_file, KEYS)
 
 
 def stats(rows: list[dict]) -> str:
