@@ -633,8 +633,8 @@ class PoseEstimator:
         if 0.0 < config.position_max_tau_m and reg.tau_m <= config.position_max_tau_m:
             # the target's centre, the same for the pose and its flip, where the depth is fine enough to trust it
             # (PoseResult.position_valid; registration.position_max_tau_m, 0: not without a valid pose). From the
-            # outline's winner when it fits: its size pins the range better than the stereo points (on the 90
-            # unseen 1280x960 frames mean e_pos 0.30 -> 0.28 m); else from the registered pose
+            # outline's winner when it fits: its size pins the range better than the stereo points
+            # (reports/position_s25/plan.txt); else from the registered pose
             fits = (outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px
                     and np.all(np.isfinite(outline.best.R)) and np.all(np.isfinite(outline.best.t)))
             R_c, t_c = (outline.best.R, outline.best.t) if fits else (reg.R, reg.t)

@@ -1,6 +1,11 @@
 """Session 25: the target position without attitude, measured by the commands of ``plan.txt``.
 
     python reports/position_s25/summarize.py [--round 2] [RUNS]
+    python reports/position_s25/summarize.py --choose [RUNS]
+
+``--choose``: how round 2's tolerance gate was chosen, on round 1's rows (every position-only frame kept when its
+``depth_tolerance_m`` is at most X; valid poses always): share with a position, e_pos mean / median / p95 / max and
+the share within the tolerance, per X.
 
 Round 1 (``plan.txt``) reads ``RUNS/{test_final,unseen_final,fresh640_a,fresh640_b,fresh1280}/pose_eval.json``
 (default ``runs/s25``) when they exist and writes the compact rows beside this file (``rows.json.gz``); else it
@@ -45,8 +50,23 @@ def stats(rows: list[dict]) -> str:
             f"{100 * np.mean(e <= tau):>6.1f}%")
 
 
+def choose(runs: Path) -> int:
+    rows = [r for part in load(runs, SETS, "rows.json.gz").values() for r in part]
+    print(f"round 1's {len(rows)} frames; a position-only frame kept when its tolerance <= X")
+    print(f"{'X m':>6}{'share':>8}{'mean':>7}{'median':>7}{'p95':>7}{'max':>7}{'<=tau':>8}")
+    for x in (0.5, 0.7, 1.0, 1.2, 1.5, 2.0, float("inf")):
+        pos = [r for r in rows if r["position_valid"] and (r["valid"] or r["depth_tolerance_m"] <= x)]
+        e = np.array([r["e_pos"] for r in pos])
+        within = np.mean([r["e_pos"] <= r["depth_tolerance_m"] for r in pos])
+        print(f"{x:>6.1f}{100 * len(pos) / len(rows):>7.1f}%{e.mean():>7.3f}{np.median(e):>7.3f}"
+              f"{np.percentile(e, 95):>7.3f}{e.max():>7.2f}{100 * within:>7.1f}%")
+    return 0
+
+
 def main() -> int:
     args = sys.argv[1:]
+    if args[:1] == ["--choose"]:
+        return choose(Path(args[1]) if len(args) > 1 else Path("runs/s25"))
     round_ = 1
     if args[:1] == ["--round"]:
         round_, args = int(args[1]), args[2:]
