@@ -53,7 +53,7 @@ from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
-from .silhouette import decide_outline, polish_pose
+from .silhouette import align_centroid, decide_outline, polish_pose
 
 __all__ = ["PoseResult", "PoseEstimator", "DECISION_ROUTES", "rotation_to_quaternion", "pose_crop_window",
            "refine_icp"]
@@ -122,7 +122,8 @@ class PoseResult:
             but could not tell from its 180° flip (``weak_votes`` from the flip decision): the flip turns
             the target about an axis through ``centre``, so both candidates put the centre at the same
             place. ``position`` is then the centre of the outline stage's best fit when that fits within
-            ``silhouette.max_chamfer_px``, else of the registered pose. A navigation filter can use the
+            ``silhouette.max_chamfer_px``, else of the registered pose (with ``registration.position_lateral``
+            moved parallel to the image plane so that its outline's centroid is the observed one's). A navigation filter can use the
             relative position on such frames without the attitude (``valid`` stays false: the attitude is
             unknown up to the flip). Only where the frame's ``depth_tolerance_m`` is at most the bundle's
             ``registration.position_max_tau_m`` (0, the default: only with a valid pose). Accuracy: the
@@ -634,10 +635,15 @@ class PoseEstimator:
             # the target's centre, the same for the pose and its flip, where the depth is fine enough to trust it
             # (PoseResult.position_valid; registration.position_max_tau_m, 0: not without a valid pose). From the
             # outline's winner when it fits: its size pins the range better than the stereo points
-            # (reports/position_s25/plan.txt); else from the registered pose
+            # (reports/position_s25/plan.txt); else from the registered pose, with position_lateral moved in
+            # the image plane onto the observed outline's centroid
             fits = (outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px
                     and np.all(np.isfinite(outline.best.R)) and np.all(np.isfinite(outline.best.t)))
             R_c, t_c = (outline.best.R, outline.best.t) if fits else (reg.R, reg.t)
+            if not fits and config.position_lateral and outline is not None and outline.observed is not None:
+                # the registered pose's outline moved onto the observed one (session 26)
+                shifted = align_centroid(reg.R, reg.t, self._outline_points, outline.observed, outline.frame)
+                t_c = t_c if shifted is None else shifted
             factors.update(zip(_POSITION_KEYS, (float(v) for v in R_c @ bundle.centre + t_c)))
         flip_p = self._flip_probability(outline, stereo, left_r, timer)
         if flip_p is not None:

@@ -66,6 +66,10 @@ class RegistrationConfig:
         when its depth tolerance ``tau`` is at most this; 0: only a valid pose reports a position.
         The flip leaves the centre in place, so the position does not depend on the flip; ``tau``
         bounds its error (session 25: model card, "Target position without attitude").
+    position_lateral: 1: where that position comes from the registered pose (the outline's best fit is
+        looser than ``silhouette.max_chamfer_px``), move it parallel to the image plane so that the
+        registered pose's outline centroid lands on the observed outline's
+        (:func:`spacepose.silhouette.align_centroid`); 0: the registered pose's centre as it is.
     """
 
     starts: int = 48
@@ -87,6 +91,7 @@ class RegistrationConfig:
     track_max_deg: float = 20.0
     track_max_m: float = 1.0
     position_max_tau_m: float = 0.0
+    position_lateral: int = 0
 
 
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:

@@ -59,7 +59,7 @@ from .registration import SurfaceModel, cross_into, exp_so3, rotation_angle_deg
 
 __all__ = ["SilhouetteConfig", "SilhouetteFrame", "OutlineFit", "OutlineDecision", "silhouette_frame",
            "splat_mask", "observed_mask", "contour", "chamfer_px", "points_residual", "refine_outline",
-           "decide_outline", "polish_pose"]
+           "decide_outline", "polish_pose", "align_centroid"]
 
 _KERNEL = np.ones((3, 3), np.uint8)
 
@@ -562,6 +562,34 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
                            margin_px=float(margin) if math.isfinite(margin) else 0.0,
                            turned_deg=float(rotation_angle_deg(best.R, other.R)) if rivals else float("nan"),
                            vote=vote, frame=frame, observed=observed)
+
+
+def align_centroid(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, observed: np.ndarray,
+                   frame: SilhouetteFrame) -> np.ndarray | None:
+    """``t`` (3,) moved parallel to the image plane so that the centroid of the model's outline at
+    ``(R, t)`` lands on the centroid of the ``observed`` (n, n) outline mask of ``frame``; the range
+    (camera z) is kept. ``None`` when either mask is empty or touches the frame's edge (a cut
+    outline has a shifted centroid).
+
+    A pose whose orientation is a few degrees off (what registration gives where the outline does not
+    fit) still puts the target's area where the image shows it: the shift moves the whole target, so
+    where the flip leaves the target's centre (:class:`spacepose.estimator.PoseResult` ``position``)
+    it moves that centre by the same amount.
+    """
+    n = frame.size
+    check_shape(observed, (n, n), "observed")
+    t = np.asarray(t, dtype=np.float64)
+    model, _, _ = splat_mask(silhouette_points, R, t, frame)
+    centroids = []
+    for mask in (np.asarray(observed), model):
+        if not mask.any() or mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any():
+            return None
+        rows, cols = np.nonzero(mask)
+        centroids.append((cols.mean(), rows.mean()))
+    (u_obs, v_obs), (u_mod, v_mod) = centroids
+    if not t[2] > 0.0:
+        return None
+    return t + np.array([(u_obs - u_mod) * t[2] / frame.K[0, 0], (v_obs - v_mod) * t[2] / frame.K[1, 1], 0.0])
 
 
 def polish_pose(decision: OutlineDecision, R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray,

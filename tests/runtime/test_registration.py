@@ -217,6 +217,8 @@ def test_bundle_registration_section(tmp_path):
     ({"min_inlier_fraction": -0.1}, "min_inlier_fraction"),
     ({"reach_decay": 1.5}, "reach_decay"),
     ({"position_max_tau_m": -1.0}, "position_max_tau_m"),
+    ({"position_lateral": 2}, "position_lateral"),
+    ({"position_lateral": 0.5}, "position_lateral"),
     ([], "must be an object"),
 ])
 def test_bundle_refuses_bad_registration_sections(tmp_path, section, match):

@@ -16,7 +16,7 @@ from spacepose.bundle import load_bundle  # noqa: E402
 from spacepose.errors import BundleError, ShapeError  # noqa: E402
 from spacepose.flip import flipped_pose  # noqa: E402
 from spacepose.registration import SurfaceModel, rotation_angle_deg  # noqa: E402
-from spacepose.silhouette import (OutlineDecision, SilhouetteConfig, chamfer_px, contour,  # noqa: E402
+from spacepose.silhouette import (OutlineDecision, align_centroid, SilhouetteConfig, chamfer_px, contour,  # noqa: E402
                                   decide_outline, observed_mask, polish_pose, refine_outline, silhouette_frame,
                                   splat_mask)
 
@@ -138,6 +138,33 @@ def test_chamfer_is_zero_for_the_same_mask_and_grows_with_a_shift():
     assert 1.0 < chamfer_px(shifted, m, 8.0) <= 3.0
     assert chamfer_px(shifted, m, 8.0, scale=0.5) == pytest.approx(2 * chamfer_px(shifted, m, 8.0))
     assert chamfer_px(np.zeros_like(m), m, 8.0, scale=0.5) == 16.0   # nothing to compare: the cap
+
+
+def test_align_centroid_moves_the_pose_onto_the_observed_outline(plate):
+    """A pose a few degrees and 0.3 m off sideways: the shift puts the centre back within a few cm in the image
+    plane and keeps the range; a cut or empty outline gives no shift."""
+    pts, _ = plate
+    R, t = _pose()
+    frame = silhouette_frame(K, 160, 80, 320, 192)
+    obs = observed_mask(_disparity_of(pts, R, t), frame, 10.0)
+    dR = Rotation.from_rotvec(np.radians(4) * np.array([0.6, -0.5, 0.62])).as_matrix()
+    t0 = t + np.array([0.25, -0.15, 0.4])
+    aligned = align_centroid(dR @ R, t0, pts, obs, frame)
+    assert aligned[2] == t0[2]
+    before, after = (np.linalg.norm((dR @ R @ CENTRE + v - (R @ CENTRE + t))[:2]) for v in (t0, aligned))
+    assert after < 0.05 < 0.25 < before
+    # exactly the pose: no shift beyond the splat's rounding
+    assert np.linalg.norm(align_centroid(R, t, pts, obs, frame) - t) < 0.01
+    # the same at a quarter of the resolution (the frame's own pixels)
+    small = silhouette_frame(K, 160, 80, 320, 80)
+    obs_small = observed_mask(_disparity_of(pts, R, t), small, 10.0)
+    assert np.linalg.norm((align_centroid(dR @ R, t0, pts, obs_small, small) - t)[:2]) < 0.08
+    # a window that cuts the target, or an empty outline: no shift
+    cut = silhouette_frame(K, 300, 80, 120, 192)
+    assert align_centroid(R, t, pts, observed_mask(_disparity_of(pts, R, t), cut, 10.0), cut) is None
+    assert align_centroid(R, t, pts, np.zeros_like(obs), frame) is None
+    with pytest.raises(ShapeError):
+        align_centroid(R, t, pts, obs[:-1], frame)
 
 
 def test_refinement_recovers_a_perturbed_pose(plate):
@@ -411,6 +438,48 @@ def test_the_estimator_decides_by_the_outline(tmp_path):
     assert not res.valid and res.status == "weak_votes" and "the outline does not decide" in res.detail
     assert res.decided_by == ""
     assert np.isfinite(res.outline_margin_px) and res.outline_margin_px < 5.0
+
+
+def test_a_loose_outline_moves_the_registered_position_when_the_bundle_asks(tmp_path, monkeypatch):
+    """With ``registration.position_lateral`` a position-only frame whose outline fits loosely reports the
+    registered centre moved by :func:`align_centroid`; without it, or where the outline fits, it is not moved."""
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+
+    left, right = synthetic_pair()
+    calls = []
+    real = estimator_module.align_centroid
+
+    def spy(R, t, *args):
+        shifted = real(R, t, *args)
+        calls.append((np.array(t), shifted))
+        return None if shifted is None else shifted + np.array([0.1, 0.0, 0.0])
+
+    monkeypatch.setattr(estimator_module, "align_centroid", spy)
+
+    def estimator(name, lateral, chamfer_px):
+        est = _estimator(tmp_path / name, {"min_margin": 0.99, "position_max_tau_m": 5.0, "position_lateral": lateral},
+                         {"max_chamfer_px": 1.5, "min_margin_px": 5.0})
+        real_outline = est._outline
+
+        def outline(*args, **kwargs):   # the synthetic plate fits exactly: make its fit as loose as asked
+            d = real_outline(*args, **kwargs)
+            return dataclasses.replace(d, best=dataclasses.replace(d.best, chamfer_px=chamfer_px))
+
+        est._outline = outline
+        return est.estimate(left, right)
+
+    plain = estimator("p", 0, 3.0)
+    assert plain.status == "weak_votes" and plain.position_valid and not calls
+    moved = estimator("m", 1, 3.0)
+    assert moved.status == "weak_votes" and moved.position_valid and len(calls) == 1
+    t_reg, shifted = calls[0]
+    assert shifted is not None and shifted[2] == t_reg[2]
+    # the registered centre, moved by the centroid's shift (and the spy's 0.1 m)
+    np.testing.assert_allclose(moved.position - plain.position, shifted - t_reg + [0.1, 0.0, 0.0], atol=1e-9)
+    calls.clear()
+    fits = estimator("f", 1, 1.0)
+    assert fits.status == "weak_votes" and fits.position_valid and not calls   # the outline's fit is used as it is
 
 
 def test_the_estimator_searches_the_outline_when_the_bundle_asks(tmp_path):

@@ -1,0 +1,92 @@
+"""Session 26: the verdict of ``plan.txt`` (the registered position moved onto the observed outline).
+
+    python reports/position_s26/judge.py [RUNS]
+
+Reads ``RUNS/{f640a,f640b,f1280}_{default,lat26}/pose_eval.json`` (default ``runs/s26``) when they exist and
+writes their compact rows beside this file (``rows.json.gz``); else reads those committed rows. Prints, per fresh
+set and bundle: frames, valid poses, position-valid frames, e_pos mean / median / p95 / max, the share within the
+frame's ``depth_tolerance_m``; the frames whose position the candidate moves; per regime; then the rule's clauses.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "position_s25"))
+from _rows import compact_rows  # noqa: E402
+
+SETS = {"fresh s26 (900, 640x480, seed 2601)": ["f640a", "f640b"],
+        "fresh s26 (270, 1280x960, seed 2602)": ["f1280"]}
+BUNDLES = ("default", "lat26")
+KEYS = ("frame", "regime", "distance", "valid", "status", "position_valid", "e_pos", "e_pos_los",
+        "depth_tolerance_m", "e_t", "e_R", "position")
+
+
+def load(runs: Path) -> dict[str, list[dict]]:
+    files = {f"{name}|{b}": [runs / f"{part}_{b}" / "pose_eval.json" for part in parts]
+             for name, parts in SETS.items() for b in BUNDLES}
+    return compact_rows(files, HERE / "rows.json.gz", KEYS)
+
+
+def stats(rows: list[dict]) -> str:
+    pos = [r for r in rows if r["position_valid"]]
+    if not pos:
+        return f"{len(rows):>6} {0:>6}"
+    e = np.array([r["e_pos"] for r in pos])
+    tau = np.array([r["depth_tolerance_m"] for r in pos])
+    return (f"{len(rows):>6} {len(pos):>6} {e.mean():>7.3f} {np.median(e):>7.3f} {np.percentile(e, 95):>6.3f} "
+            f"{e.max():>6.2f} {100 * np.mean(e <= tau):>6.1f}%")
+
+
+def same(a: float, b: float) -> bool:
+    return (np.isnan(a) and np.isnan(b)) or a == b
+
+
+def main(runs: Path) -> int:
+    rows = load(runs)
+    header = f"{'':34s}{'frames':>7}{'pos':>7}{'mean':>8}{'median':>8}{'p95':>7}{'max':>7}{'<=tau':>8}"
+    verdicts = []
+    for name in SETS:
+        base, cand = rows[f"{name}|default"], rows[f"{name}|lat26"]
+        assert [r["frame"] for r in base] == [r["frame"] for r in cand], "the two runs differ in frames"
+        identical = all(a[k] == b[k] for a, b in zip(base, cand) for k in ("valid", "status", "position_valid"))
+        identical &= all(same(a[k], b[k]) for a, b in zip(base, cand) for k in ("e_t", "e_R"))
+        moved = [i for i, (a, b) in enumerate(zip(base, cand))
+                 if a["position_valid"] and not np.allclose(a["position"], b["position"], rtol=0, atol=1e-9)]
+        print(f"\n{name}: {sum(r['valid'] for r in base)} valid poses (both bundles)")
+        print(header)
+        for b, rs in (("shipped", base), ("candidate C", cand)):
+            print(f"{b:34s}{stats(rs)}")
+        for b, rs in (("shipped, moved frames", base), ("candidate C, moved frames", cand)):
+            print(f"{b:34s}{stats([rs[i] for i in moved])}")
+        for regime in sorted({r["regime"] for r in base}):
+            for b, rs in (("shipped", base), ("C", cand)):
+                print(f"{'  ' + regime + ', ' + b:34s}{stats([r for r in rs if r['regime'] == regime])}")
+        lat = {b: [rs[i]["e_pos"] for i in moved] for b, rs in (("s", base), ("c", cand))}
+        los = {b: [abs(rs[i]["e_pos_los"]) for i in moved] for b, rs in (("s", base), ("c", cand))}
+        if moved:
+            print(f"moved frames: {len(moved)}; better with C on {sum(c < s for s, c in zip(lat['s'], lat['c']))}; "
+                  f"mean |range error| {np.mean(los['s']):.3f} -> {np.mean(los['c']):.3f} m")
+        pos_b = [r["e_pos"] for r in base if r["position_valid"]]
+        pos_c = [r for r in cand if r["position_valid"]]
+        e_c = np.array([r["e_pos"] for r in pos_c])
+        clauses = {
+            "1 same poses, validity, position_valid": identical,
+            "2 moved frames: mean e_pos lower with C": bool(moved) and np.mean(lat["c"]) < np.mean(lat["s"]),
+            "3 all position-valid frames: mean e_pos lower with C": float(e_c.mean()) < float(np.mean(pos_b)),
+            "4 with C >= 95 % within tolerance, none > 2.0 m": (
+                np.mean([r["e_pos"] <= r["depth_tolerance_m"] for r in pos_c]) >= 0.95 and e_c.max() <= 2.0),
+        }
+        for clause, ok in clauses.items():
+            print(f"  {clause}: {'met' if ok else 'NOT met'}")
+        verdicts.append(all(clauses.values()))
+    print(f"\nrule: {'MET — C ships' if all(verdicts) else 'NOT met — nothing ships'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("runs/s26")))
