@@ -542,7 +542,8 @@ def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | No
     if n_surface < 12:
         raise BundleError("bundle.json: registration needs target.surface_points (at least 12)")
     values = _config_fields(RegistrationConfig, section, "registration", zero_ints=("seed", "position_lateral"),
-                            zero_numbers=("min_margin", "min_inlier_fraction", "position_max_tau_m"))
+                            zero_numbers=("min_margin", "min_inlier_fraction", "position_max_tau_m",
+                                          "position_max_chamfer_px"))
     if not 0.0 <= values["min_inlier_fraction"] <= 1.0:
         raise BundleError(f"bundle.json: registration.min_inlier_fraction must be in [0, 1], "
                           f"got {values['min_inlier_fraction']!r}")
@@ -553,6 +554,9 @@ def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | No
     if values["position_max_tau_m"] < 0.0:
         raise BundleError(f"bundle.json: registration.position_max_tau_m must be >= 0 (0: off), "
                           f"got {values['position_max_tau_m']!r}")
+    if values["position_max_chamfer_px"] < 0.0:
+        raise BundleError(f"bundle.json: registration.position_max_chamfer_px must be >= 0 (0: off), "
+                          f"got {values['position_max_chamfer_px']!r}")
     if values["position_lateral"] not in (0, 1):
         raise BundleError(f"bundle.json: registration.position_lateral must be 0 or 1, "
                           f"got {values['position_lateral']!r}")

@@ -126,7 +126,8 @@ class PoseResult:
             moved parallel to the image plane so that its outline's centroid is the observed one's). A navigation filter can use the
             relative position on such frames without the attitude (``valid`` stays false: the attitude is
             unknown up to the flip). Only where the frame's ``depth_tolerance_m`` is at most the bundle's
-            ``registration.position_max_tau_m`` (0, the default: only with a valid pose). Accuracy: the
+            ``registration.position_max_tau_m`` (0, the default: only with a valid pose), and, with
+            ``registration.position_max_chamfer_px``, where the outline's best fit is within it. Accuracy: the
             model card, "Target position without attitude".
             In the JSON line since session 25.
         tracked: the pose was decided by the prior, the last valid pose at most ``prior_max_gap``
@@ -631,7 +632,9 @@ class PoseEstimator:
                                outline_image_background=outline.vote.background_lit,
                                outline_image_pixels=float(outline.vote.pixels))
         sil = bundle.silhouette
-        if 0.0 < config.position_max_tau_m and reg.tau_m <= config.position_max_tau_m:
+        outline_fits_position = config.position_max_chamfer_px <= 0.0 or (
+            outline is not None and outline.best.chamfer_px <= config.position_max_chamfer_px)
+        if 0.0 < config.position_max_tau_m and reg.tau_m <= config.position_max_tau_m and outline_fits_position:
             # the target's centre, the same for the pose and its flip, where the depth is fine enough to trust it
             # (PoseResult.position_valid; registration.position_max_tau_m, 0: not without a valid pose). From the
             # outline's winner when it fits: its size pins the range better than the stereo points

@@ -70,6 +70,9 @@ class RegistrationConfig:
         looser than ``silhouette.max_chamfer_px``), move it parallel to the image plane so that the
         registered pose's outline centroid lands on the observed outline's
         (:func:`spacepose.silhouette.align_centroid`); 0: the registered pose's centre as it is.
+    position_max_chamfer_px: with ``position_max_tau_m``, such a frame also needs an outline stage whose best fit
+        is within this chamfer (outline px); 0: no outline gate. A registration whose outline fits this badly
+        can be wrong in range by metres where ``tau`` says under 1 m (session 26, model card).
     """
 
     starts: int = 48
@@ -92,6 +95,7 @@ class RegistrationConfig:
     track_max_m: float = 1.0
     position_max_tau_m: float = 0.0
     position_lateral: int = 0
+    position_max_chamfer_px: float = 0.0
 
 
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:

@@ -26,7 +26,8 @@ def main(paths):
         rs = [r for r in pos if sel(r)]
         print(f"\n{sub}: {len(rs)} frames")
         print(f"{'estimate':10s} {'mean e':>7s} {'median':>7s} {'p95':>6s} {'max':>6s} {'range bias':>10s} {'|range|':>8s} {'lateral':>8s} {'<=tau':>6s}")
-        for key in ("position", "reg", "reg_lat", "best", "best_lat", "xyz_mean"):
+        for key in ("position", "reg", "reg_lat", "best", "best_lat", "xyz_mean", "reg_area", "best_area",
+                    "reg_pol", "best_pol"):
             es, rr, ll, within = [], [], [], []
             for r in rs:
                 if key not in r:

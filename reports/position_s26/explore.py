@@ -29,6 +29,15 @@ def lateral_shift(R, t, points, observed, frame):
     return np.asarray(t, float) + np.array([du * z / fx, dv * z / fy, 0.0])
 
 
+def area_scaled(R, t, points, observed, frame):
+    """The pose moved along the line of sight by the ratio of the outlines' areas (area ~ 1 / range^2)."""
+    from spacepose.silhouette import splat_mask
+    mask, _, _ = splat_mask(points, R, t, frame)
+    if mask.sum() < 10 or observed.sum() < 10:
+        return None
+    return np.asarray(t, float) * np.sqrt(mask.sum() / observed.sum())
+
+
 def main() -> None:
     from spacepose.bundle import load_bundle
     from spacepose.calibration.rig import load_rig
@@ -77,6 +86,17 @@ def main() -> None:
                     ts = lateral_shift(R, t, est._outline_points, out.observed, out.frame)
                     if ts is not None:
                         row[name + "_lat"] = (R @ centre + ts).tolist()
+                from spacepose.silhouette import polish_pose
+                sil = model.silhouette
+                for name, (R, t) in (("reg", (reg.R, reg.t)), ("best", (out.best.R, out.best.t))):
+                    a = area_scaled(R, t, est._outline_points, out.observed, out.frame)
+                    if a is not None:
+                        row[name + "_area"] = (R @ centre + a).tolist()
+                    pol = polish_pose(out, R, t, est._outline_points, sil, stereo_points=cap["xyz"],
+                                      surface=est._registration, tau_m=reg.tau_m)
+                    if pol is not None:
+                        row[name + "_pol"] = (pol.R @ centre + pol.t).tolist()
+                        row[name + "_pol_chamfer"] = float(pol.chamfer_px)
                 row["chamfer"] = float(out.best.chamfer_px)
                 row["xyz_mean"] = np.asarray(cap["xyz"], float).reshape(-1, 3).mean(0).tolist()
             fh.write(json.dumps(row) + "\n")

@@ -218,6 +218,7 @@ def test_bundle_registration_section(tmp_path):
     ({"reach_decay": 1.5}, "reach_decay"),
     ({"position_max_tau_m": -1.0}, "position_max_tau_m"),
     ({"position_lateral": 2}, "position_lateral"),
+    ({"position_max_chamfer_px": -1.0}, "position_max_chamfer_px"),
     ({"position_lateral": 0.5}, "position_lateral"),
     ([], "must be an object"),
 ])

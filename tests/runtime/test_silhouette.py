@@ -482,6 +482,28 @@ def test_a_loose_outline_moves_the_registered_position_when_the_bundle_asks(tmp_
     assert fits.status == "weak_votes" and fits.position_valid and not calls   # the outline's fit is used as it is
 
 
+def test_a_badly_fitting_outline_gives_no_position_when_the_bundle_gates_it(tmp_path):
+    """``registration.position_max_chamfer_px``: a position-only frame whose outline's best fit is looser than
+    the gate reports no position; within it, or with the gate off (0), it does."""
+    from _bundle_fixtures import synthetic_pair
+
+    left, right = synthetic_pair()
+
+    def estimate(name, gate, chamfer_px):
+        est = _estimator(tmp_path / name, {"min_margin": 0.99, "position_max_tau_m": 5.0,
+                                           "position_max_chamfer_px": gate},
+                         {"max_chamfer_px": 1.5, "min_margin_px": 5.0})
+        real_outline = est._outline
+        est._outline = lambda *a, **k: (lambda d: dataclasses.replace(
+            d, best=dataclasses.replace(d.best, chamfer_px=chamfer_px)))(real_outline(*a, **k))
+        return est.estimate(left, right)
+
+    for name, gate, chamfer, expected in (("in", 3.0, 2.9, True), ("out", 3.0, 3.1, False), ("off", 0.0, 9.0, True)):
+        res = estimate(name, gate, chamfer)
+        assert res.status == "weak_votes" and not res.valid
+        assert res.position_valid is expected and bool(np.all(np.isfinite(res.position))) is expected, name
+
+
 def test_the_estimator_searches_the_outline_when_the_bundle_asks(tmp_path):
     from _bundle_fixtures import synthetic_pair
 
