@@ -79,7 +79,7 @@ def main(runs: Path, rnd: int = 1) -> int:
         lat = {b: [rs[i]["e_pos"] for i in moved] for b, rs in (("s", base), ("c", cand))}
         los = {b: [abs(rs[i]["e_pos_los"]) for i in moved] for b, rs in (("s", base), ("c", cand))}
         if moved:
-            print(f"moved frames: {len(moved)}; better with C on {sum(c < s for s, c in zip(lat['s'], lat['c']))}; "
+            print(f"moved frames: {len(moved)}; better with {label[-1]} on {sum(c < s for s, c in zip(lat['s'], lat['c']))}; "
                   f"mean |range error| {np.mean(los['s']):.3f} -> {np.mean(los['c']):.3f} m")
         pos_b = [r["e_pos"] for r in base if r["position_valid"]]
         pos_c = [r for r in cand if r["position_valid"]]
