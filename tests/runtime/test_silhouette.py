@@ -16,8 +16,8 @@ from spacepose.bundle import load_bundle  # noqa: E402
 from spacepose.errors import BundleError, ShapeError  # noqa: E402
 from spacepose.flip import flipped_pose  # noqa: E402
 from spacepose.registration import SurfaceModel, rotation_angle_deg  # noqa: E402
-from spacepose.silhouette import (OutlineDecision, align_centroid, SilhouetteConfig, chamfer_px, contour,  # noqa: E402
-                                  decide_outline, observed_mask, polish_pose, refine_outline, silhouette_frame,
+from spacepose.silhouette import (OutlineDecision, SilhouetteConfig, align_centroid, chamfer_px,  # noqa: E402
+                                  contour, decide_outline, observed_mask, polish_pose, refine_outline, silhouette_frame,
                                   splat_mask)
 
 K = np.array([[800.0, 0, 319.5], [0, 800.0, 239.5], [0, 0, 1]])
@@ -440,6 +440,18 @@ def test_the_estimator_decides_by_the_outline(tmp_path):
     assert np.isfinite(res.outline_margin_px) and res.outline_margin_px < 5.0
 
 
+def _with_outline_chamfer(est, chamfer_px):
+    """``est`` with its outline decision's best fit given ``chamfer_px`` (the synthetic plate fits exactly)."""
+    real_outline = est._outline
+
+    def outline(*args, **kwargs):
+        d = real_outline(*args, **kwargs)
+        return dataclasses.replace(d, best=dataclasses.replace(d.best, chamfer_px=chamfer_px))
+
+    est._outline = outline
+    return est
+
+
 def test_a_loose_outline_moves_the_registered_position_when_the_bundle_asks(tmp_path, monkeypatch):
     """With ``registration.position_lateral`` a position-only frame whose outline fits loosely reports the
     registered centre moved by :func:`align_centroid`; without it, or where the outline fits, it is not moved."""
@@ -460,14 +472,7 @@ def test_a_loose_outline_moves_the_registered_position_when_the_bundle_asks(tmp_
     def estimator(name, lateral, chamfer_px):
         est = _estimator(tmp_path / name, {"min_margin": 0.99, "position_max_tau_m": 5.0, "position_lateral": lateral},
                          {"max_chamfer_px": 1.5, "min_margin_px": 5.0})
-        real_outline = est._outline
-
-        def outline(*args, **kwargs):   # the synthetic plate fits exactly: make its fit as loose as asked
-            d = real_outline(*args, **kwargs)
-            return dataclasses.replace(d, best=dataclasses.replace(d.best, chamfer_px=chamfer_px))
-
-        est._outline = outline
-        return est.estimate(left, right)
+        return _with_outline_chamfer(est, chamfer_px).estimate(left, right)
 
     plain = estimator("p", 0, 3.0)
     assert plain.status == "weak_votes" and plain.position_valid and not calls
@@ -493,10 +498,7 @@ def test_a_badly_fitting_outline_gives_no_position_when_the_bundle_gates_it(tmp_
         est = _estimator(tmp_path / name, {"min_margin": 0.99, "position_max_tau_m": 5.0,
                                            "position_max_chamfer_px": gate},
                          {"max_chamfer_px": 1.5, "min_margin_px": 5.0})
-        real_outline = est._outline
-        est._outline = lambda *a, **k: (lambda d: dataclasses.replace(
-            d, best=dataclasses.replace(d.best, chamfer_px=chamfer_px)))(real_outline(*a, **k))
-        return est.estimate(left, right)
+        return _with_outline_chamfer(est, chamfer_px).estimate(left, right)
 
     for name, gate, chamfer, expected in (("in", 3.0, 2.9, True), ("out", 3.0, 3.1, False), ("off", 0.0, 9.0, True)):
         res = estimate(name, gate, chamfer)
