@@ -21,7 +21,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from _rows import compact_rows
+from _rows import STATS_HEAD, compact_rows
+from _rows import position_stats as stats
 
 HERE = Path(__file__).resolve().parent
 SETS = {"test split (300, 640x480)": ["test_final"], "unseen (90, 1280x960)": ["unseen_final"],
@@ -37,17 +38,6 @@ KEYS = ("frame", "regime", "distance", "valid", "status", "position_valid", "e_p
 def load(runs: Path, sets: dict[str, list[str]], rows_file: str) -> dict[str, list[dict]]:
     files = {name: [runs / part / "pose_eval.json" for part in parts] for name, parts in sets.items()}
     return compact_rows(files, HERE / rows_file, KEYS)
-
-
-def stats(rows: list[dict]) -> str:
-    pos = [r for r in rows if r["position_valid"]]
-    if not pos:
-        return f"{len(rows):>5} {sum(r['valid'] for r in rows):>5} {0:>5}"
-    e = np.array([r["e_pos"] for r in pos])
-    tau = np.array([r["depth_tolerance_m"] for r in pos])
-    return (f"{len(rows):>5} {sum(r['valid'] for r in rows):>5} {len(pos):>5} {100 * len(pos) / len(rows):>5.1f}% "
-            f"{e.mean():>6.3f} {np.median(e):>6.3f} {np.percentile(e, 95):>6.3f} {e.max():>6.2f} "
-            f"{100 * np.mean(e <= tau):>6.1f}%")
 
 
 def choose(runs: Path) -> int:
@@ -73,7 +63,7 @@ def main() -> int:
     sets, fresh, rows_file, max_m = ROUNDS[round_]
     runs = Path(args[0]) if args else Path("runs/s25")
     data = load(runs, sets, rows_file)
-    head = f"{'group':<34}{'frames':>5} {'valid':>5} {'pos':>5} {'share':>6} {'mean':>6} {'median':>6} {'p95':>6} {'max':>6} {'<=tau':>7}"
+    head = f"{'group':<34}{STATS_HEAD}"
     for name, rows in data.items():
         print(f"\n{name}  (e_pos in m over position-valid frames)\n{head}")
         print(f"{'all':<34}" + stats(rows))

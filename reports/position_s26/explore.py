@@ -1,7 +1,10 @@
 """Session 26, exploration (spent sets only): alternative centre estimates on position-only frames.
 
 For each frame the shipped estimator reports, the registration and outline objects are captured and the
-target centre is computed several ways; rows written as JSON lines with the truth.
+target centre is computed several ways; rows written as JSON lines with the truth. ``position`` is what the default
+bundle reports when the script runs: the session-26 rows (``runs/s26/exp*.jsonl``) were made with session 25's
+bundle, before ``position_lateral`` shipped (since then it is ``reg_lat`` on the frames it moves, but for outlines
+cut by the frame edge).
 
     python reports/position_s26/explore.py DATASET --skip S --limit N --out rows.jsonl
 """
@@ -15,11 +18,18 @@ from pathlib import Path
 import numpy as np
 
 
-def lateral_shift(R, t, points, observed, frame):
-    """t shifted across the line of sight so the model's silhouette centroid lands on the observed one."""
+def _model_mask(R, t, points, observed, frame):
+    """The model's outline mask at (R, t) in ``frame``; None when it or ``observed`` has under 10 pixels."""
     from spacepose.silhouette import splat_mask
     mask, _, _ = splat_mask(points, R, t, frame)
-    if mask.sum() < 10 or observed.sum() < 10:
+    return None if mask.sum() < 10 or observed.sum() < 10 else mask
+
+
+def lateral_shift(R, t, points, observed, frame):
+    """t shifted across the line of sight so the model's silhouette centroid lands on the observed one (unlike
+    :func:`spacepose.silhouette.align_centroid`, with no check of outlines cut by the frame's edge)."""
+    mask = _model_mask(R, t, points, observed, frame)
+    if mask is None:
         return None
     ys, xs = np.nonzero(observed)
     ym, xm = np.nonzero(mask)
@@ -31,11 +41,8 @@ def lateral_shift(R, t, points, observed, frame):
 
 def area_scaled(R, t, points, observed, frame):
     """The pose moved along the line of sight by the ratio of the outlines' areas (area ~ 1 / range^2)."""
-    from spacepose.silhouette import splat_mask
-    mask, _, _ = splat_mask(points, R, t, frame)
-    if mask.sum() < 10 or observed.sum() < 10:
-        return None
-    return np.asarray(t, float) * np.sqrt(mask.sum() / observed.sum())
+    mask = _model_mask(R, t, points, observed, frame)
+    return None if mask is None else np.asarray(t, float) * np.sqrt(mask.sum() / observed.sum())
 
 
 def main() -> None:
