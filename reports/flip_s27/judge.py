@@ -5,8 +5,12 @@ against the shipped bundle S).
 
 RUNS (default ``runs/s27``) holds ``single640_{S,C}/pose_eval.json``, ``single1280_{S,C}/pose_eval.json``
 (``eval-pose``) and ``seq_kK_{S,C}.json`` (``sequence eval``, K = 1..10). When they are all there, their frames are
-cut to the columns counted here and written to ``rows.json.gz`` beside this script; otherwise that committed file
-is read, so the verdict reproduces without the runs.
+cut to the columns counted here and written to ``rows.json.gz`` / ``rows_sequences.json.gz`` beside this script;
+otherwise those committed files are read, so the verdict reproduces without the runs.
+
+After the verdict it prints, outside the rule, the same counts on the sets the plan reports but does not judge:
+``extra640_{S,C}`` (a fresh set added before C existed), ``restyle_{S,C}`` (the restyled test split),
+``test_{S,C}`` (the test split) and ``unseen_{S,C}`` (1280x960), rows in ``rows_reported.json.gz``.
 """
 from __future__ import annotations
 
@@ -25,6 +29,8 @@ SEQUENCES = [f"seq_k{k}" for k in range(1, 11)]
 KEYS = ("frame", "regime", "distance", "valid", "status", "e_t", "e_R", "decided_by", "flip_prob",
         "outline_chamfer_px", "position_valid", "e_pos", "depth_tolerance_m")
 SEQ_KEYS = ("frame", "valid", "status", "tracked", "e_t", "e_R", "decided_by")
+REPORTED = {"extra640": "tdrs640_s27x, 900 train frames (extra)", "restyle": "restyled test split, 300",
+            "test": "test split, 300", "unseen": "unseen 1280x960, 90"}
 
 
 def load(runs: Path) -> dict[str, list[dict]]:
@@ -32,7 +38,9 @@ def load(runs: Path) -> dict[str, list[dict]]:
                            HERE / "rows.json.gz", KEYS)
     seqs = compact_rows({f"{n}_{b}": [runs / f"{n}_{b}.json"] for n in SEQUENCES for b in "SC"},
                         HERE / "rows_sequences.json.gz", SEQ_KEYS)
-    return {**singles, **seqs}
+    reported = compact_rows({f"{n}_{b}": [runs / f"{n}_{b}" / "pose_eval.json"] for n in REPORTED for b in "SC"},
+                            HERE / "rows_reported.json.gz", KEYS)
+    return {**singles, **seqs, **reported}
 
 
 def tally(frames: list[dict]) -> dict[str, int]:
@@ -86,8 +94,12 @@ def main(runs: Path) -> int:
         c_far |= far_keys(c, name)
     verdict &= judge("sequences k1..k10 (400 frames)", s_all, c_all, s_far, c_far, positions=False)
     print("verdict:", "met: ship C" if verdict else "NOT met: nothing ships")
+    print("\nreported, not judged (the same columns)")
+    for name, label in REPORTED.items():
+        s, c = rows[f"{name}_S"], rows[f"{name}_C"]
+        judge(label, s, c, far_keys(s, name), far_keys(c, name), positions=True)
     print("\nper regime, valid / wrong (S -> C), and positions (all frames with one)")
-    for name in SINGLE:
+    for name in [*SINGLE, *REPORTED]:
         for regime in sorted({r["regime"] for r in rows[f"{name}_S"]}):
             s = tally([r for r in rows[f"{name}_S"] if r["regime"] == regime])
             c = tally([r for r in rows[f"{name}_C"] if r["regime"] == regime])
