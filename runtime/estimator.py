@@ -680,6 +680,12 @@ class PoseEstimator:
                 return _stage_invalid(stage, "weak_votes", factors), (
                     f"the stereo points prefer the pose (score gap {margin:.4f}) but the image does not back it "
                     f"(image vote {outline.vote.score:+.2f})")
+            if (self._flip_classifier is not None and (need := bundle.flip_classifier.registration_min_prob) > 0.0
+                    and not (flip_p is not None and flip_p >= need)):
+                # the one route the classifier need not back otherwise; a flip so decided at p 0.59 (session 27)
+                return _stage_invalid(stage, "weak_votes", factors), (
+                    f"the stereo points prefer the pose (score gap {margin:.4f}) but the flip classifier gives it "
+                    + ("no probability" if flip_p is None else f"only {flip_p:.3f}") + f" (< {need:g})")
             if outline is not None and outline.best.chamfer_px <= sil.max_chamfer_px:
                 R, t = outline.best.R, outline.best.t
             confidence = reg.inlier_fraction * (1.0 - math.exp(-margin / max(config.min_margin, 1e-9)))

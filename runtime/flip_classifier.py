@@ -54,6 +54,10 @@ class FlipClassifierConfig:
         ``max_chamfer_px`` (the image route's looser fit) is refused unless the classifier gives it at
         least this; 0: no such check. Both image-route poses > 90° off on fresh frames of sessions 22-23
         had such fits and p 0.95-0.98 (``reports/flip_s23/gate_rule.txt``).
+    registration_min_prob: a pose the stereo points decide (the registration route) is refused unless the
+        classifier gives it at least this, or when it gives none (no outline frame to look at); 0: no such
+        check. A pose 172° off on a fresh frame of session 27 was so decided with p 0.59
+        (``reports/flip_s27/gate_rule.txt``).
     """
 
     file: str = "flip.onnx"
@@ -66,6 +70,7 @@ class FlipClassifierConfig:
     max_polish_deg: float = 0.0
     max_depth_tolerance_m: float = 0.0
     loose_fit_min_prob: float = 0.0
+    registration_min_prob: float = 0.0
 
     def __post_init__(self) -> None:
         if self.size < 16:
@@ -78,8 +83,9 @@ class FlipClassifierConfig:
         if min(self.max_chamfer_px, self.min_margin_px, self.max_polish_deg, self.max_depth_tolerance_m) < 0:
             raise ValueError("flip_classifier: max_chamfer_px, min_margin_px, max_polish_deg and "
                              "max_depth_tolerance_m must be >= 0")
-        if not 0.0 <= self.loose_fit_min_prob <= 1.0:
-            raise ValueError(f"flip_classifier.loose_fit_min_prob must be in [0, 1], got {self.loose_fit_min_prob}")
+        for key in ("loose_fit_min_prob", "registration_min_prob"):
+            if not 0.0 <= getattr(self, key) <= 1.0:
+                raise ValueError(f"flip_classifier.{key} must be in [0, 1], got {getattr(self, key)}")
 
 
 def parse_flip_classifier(section: Any) -> FlipClassifierConfig | None:

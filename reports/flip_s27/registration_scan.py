@@ -1,3 +1,13 @@
+"""Session 27: the valid poses the registration route decided on the spent single-frame sets of sessions 22-27,
+each with the bundle of its day, and what a least classifier probability for that route would have refused
+(gate R's choice, reports/flip_s27/gate_rule.txt; post hoc).
+
+    python reports/flip_s27/registration_scan.py
+
+Reads session 26's and 27's runs from runs/ where this session's machine still had them (runs/s26/*_default,
+test_shipped26, unseen_shipped26; runs/s27/*_S) and the committed rows of sessions 22-24; run elsewhere it counts
+what is there. Run from the repository root.
+"""
 import json,gzip,glob
 srcs = sorted(set(glob.glob("runs/s26/*_default/pose_eval.json")) | {"runs/s26/test_shipped26/pose_eval.json","runs/s26/unseen_shipped26/pose_eval.json"}
         | set(glob.glob("runs/s27/*_S/pose_eval.json")) | set(glob.glob("reports/flip_s24/*_S.json.gz"))

@@ -146,15 +146,16 @@ def test_bundle_section_needs_the_silhouette_stage_and_the_graph(tmp_path):
     assert load_bundle(est.bundle.path).flip_classifier == FlipClassifierConfig(size=SIZE)
 
 
-def _flip_estimator(tmp_path, monkeypatch, prob, silhouette=None, **section):
+def _flip_estimator(tmp_path, monkeypatch, prob, silhouette=None, *, registration=None, **section):
     """The outline-stage estimator of test_silhouette with a flip graph whose probability is ``prob``
-    (``silhouette``: more keys of the bundle's silhouette section)."""
+    (``silhouette``: more keys of the bundle's silhouette section; ``registration``: its registration section,
+    by default one that never decides)."""
     from test_silhouette import _estimator
 
     from spacepose.calibration.rig import paper_rig
     from spacepose.estimator import PoseEstimator
 
-    est = _estimator(tmp_path, {"min_margin": 0.99}, {"max_chamfer_px": 1.0, "min_margin_px": 0.5, "image_vote": 1,
+    est = _estimator(tmp_path, registration or {"min_margin": 0.99}, {"max_chamfer_px": 1.0, "min_margin_px": 0.5, "image_vote": 1,
                                                       "image_veto_score": 0.0, **(silhouette or {})})
     data = json.loads((est.bundle.path / "bundle.json").read_text())
     data["flip_classifier"] = {"size": SIZE, "decide_prob": 0.9, "veto_prob": 0.1, "max_chamfer_px": 1.5, **section}
@@ -358,6 +359,39 @@ def test_a_loose_outline_fit_needs_the_classifier(tmp_path, monkeypatch, prob, c
         assert res.status == "weak_votes" and "fits loosely" in res.detail
 
 
-def test_loose_fit_min_prob_must_be_a_probability():
-    with pytest.raises(BundleError, match="loose_fit_min_prob"):
-        parse_flip_classifier({"loose_fit_min_prob": 1.5})
+@pytest.mark.parametrize("key", ["loose_fit_min_prob", "registration_min_prob"])
+def test_the_backing_gates_must_be_probabilities(key):
+    with pytest.raises(BundleError, match=key):
+        parse_flip_classifier({key: 1.5})
+    with pytest.raises(BundleError, match=key):
+        parse_flip_classifier({key: -0.1})
+
+
+@pytest.mark.parametrize("prob, gate, no_view, valid", [
+    (0.8, 0.9, False, False),    # the stereo points decide, the classifier unsure: refused
+    (0.95, 0.9, False, True),    # ... sure enough: kept
+    (0.8, 0.0, False, True),     # the gate off (the default): kept
+    (0.95, 0.9, True, False),    # no probability at all (no outline frame to look at): refused
+])
+def test_a_registration_decision_needs_the_classifier(tmp_path, monkeypatch, prob, gate, no_view, valid):
+    """flip_classifier.registration_min_prob: a pose the stereo points decide (the outline leaving the frame open)
+    must get at least that probability from the classifier."""
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+
+    left, right = synthetic_pair()
+    # the registration decides (min_margin 0), the outline does not (chamfer 1.2 px > 1.0), and the classifier's
+    # own route would not either (decide_prob 0.999)
+    est = _flip_estimator(tmp_path, monkeypatch, prob, registration={"min_margin": 0.0},
+                          registration_min_prob=gate, decide_prob=0.999)
+    assert est.bundle.flip_classifier.registration_min_prob == gate
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 1.2, 0.3))
+    if no_view:
+        monkeypatch.setattr(estimator_module.PoseEstimator, "_flip_probability", lambda self, *a: None)
+    res = est.estimate(left, right)
+    assert res.valid == valid, res.detail
+    if valid:
+        assert res.decided_by == "registration" and res.flip_prob == pytest.approx(prob)
+    else:
+        assert res.status == "weak_votes" and "flip classifier gives it" in res.detail
+        assert ("no probability" in res.detail) == no_view
