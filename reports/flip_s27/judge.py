@@ -71,7 +71,8 @@ def judge(label: str, s_frames: list[dict], c_frames: list[dict], s_far: set, c_
     if positions:
         (s_in, s_over), (c_in, c_over) = position_safety(s_frames), position_safety(c_frames)
         ok["d"] = (c_in >= 0.95 and c_over == 0) or (c_in >= s_in and c_over <= s_over)
-        text = f"   positions only: within tau S {100 * s_in:.1f} % C {100 * c_in:.1f} %, over 2 m S {s_over} C {c_over}"
+        text = (f"   positions only: within tau S {100 * s_in:.1f} % C {100 * c_in:.1f} %, over 2 m S {s_over} "
+                f"C {c_over}")
     failed = [k for k, v in ok.items() if not v]
     print(f"{label:34s} S {s['valid']:4d} / {s['wrong']:2d} / {s['far']}   C {c['valid']:4d} / {c['wrong']:2d} / "
           f"{c['far']}   new > 90 deg {new_far}{text}: {'met' if not failed else 'NOT met ' + ','.join(failed)}")

@@ -5,23 +5,52 @@ each with the bundle of its day, and what a least classifier probability for tha
     python reports/flip_s27/registration_scan.py
 
 Reads session 26's and 27's runs from runs/ where this session's machine still had them (runs/s26/*_default,
-test_shipped26, unseen_shipped26; runs/s27/*_S) and the committed rows of sessions 22-24; run elsewhere it counts
-what is there. Run from the repository root.
+test_shipped26, unseen_shipped26; runs/s27/*_S but for its repeats of those two) and the committed rows of
+sessions 22-24; run elsewhere it counts what is there (this session's output: registration_scan_output.txt). Run
+from the repository root.
 """
-import json,gzip,glob
-srcs = sorted(set(glob.glob("runs/s26/*_default/pose_eval.json")) | {"runs/s26/test_shipped26/pose_eval.json","runs/s26/unseen_shipped26/pose_eval.json"}
-        | set(glob.glob("runs/s27/*_S/pose_eval.json")) | set(glob.glob("reports/flip_s24/*_S.json.gz"))
-        | set(glob.glob("reports/flip_s23/*_S.json.gz")) | {"reports/flip_s22/big2700_shipped.json.gz"})
-tot_valid=0; regs=[]
-for p in srcs:
-    d=json.load(gzip.open(p,'rt') if p.endswith('.gz') else open(p))["frames"]
-    if "seq_" in p: continue
-    v=[r for r in d if r["valid"]]; tot_valid+=len(v)
-    for r in v:
-        if r["decided_by"]=="registration": regs.append((p.split('/')[-2] if p.endswith('pose_eval.json') else p.split('/')[-1], r))
-print("sets",len(srcs),"valid",tot_valid,"registration-route",len(regs))
-for thr in (0.5,0.7,0.8,0.9,0.95,0.99):
-    ref=[r for _,r in regs if not r.get("flip_prob",float('nan'))>=thr]
-    print(thr,"refused",len(ref),"wrong among them",sum(r["e_R"]>20 or r["e_t"]>0.5 for r in ref),"flips",sum(r["e_R"]>90 for r in ref))
-for n,r in sorted(regs,key=lambda x:x[1].get("flip_prob",2)):
-    print(f"{n:28s} {r['frame']} p {r.get('flip_prob',float('nan')):.3f} eR {r['e_R']:6.1f} et {r['e_t']:.2f} ch {r['outline_chamfer_px']:.2f}")
+import glob
+import gzip
+import json
+
+MAX_E_T, MAX_E_R, FAR_DEG = 0.5, 20.0, 90.0
+
+
+def sources() -> list[str]:
+    runs = set(glob.glob("runs/s26/*_default/pose_eval.json")) | set(glob.glob("runs/s27/*_S/pose_eval.json"))
+    runs |= {"runs/s26/test_shipped26/pose_eval.json", "runs/s26/unseen_shipped26/pose_eval.json"}
+    committed = set(glob.glob("reports/flip_s24/*_S.json.gz")) | set(glob.glob("reports/flip_s23/*_S.json.gz"))
+    committed |= {"reports/flip_s22/big2700_shipped.json.gz"}
+    repeats = {"runs/s27/test_S/pose_eval.json", "runs/s27/unseen_S/pose_eval.json"}   # = session 26's runs
+    return sorted(p for p in (runs | committed) - repeats if "seq_" not in p)
+
+
+def frames(path: str) -> list[dict]:
+    try:
+        with (gzip.open(path, "rt") if path.endswith(".gz") else open(path)) as fh:
+            return json.load(fh)["frames"]
+    except FileNotFoundError:
+        return []
+
+
+def main() -> None:
+    n_sets, n_valid, regs = 0, 0, []
+    for path in sources():
+        valid = [r for r in frames(path) if r["valid"]]
+        n_sets += bool(valid)
+        n_valid += len(valid)
+        name = path.split("/")[-2] if path.endswith("pose_eval.json") else path.split("/")[-1]
+        regs += [(name, r) for r in valid if r["decided_by"] == "registration"]
+    print(f"sets {n_sets}, valid poses {n_valid}, by the registration route {len(regs)}")
+    for thr in (0.5, 0.7, 0.8, 0.9, 0.95, 0.99):
+        gone = [r for _, r in regs if not r.get("flip_prob", float("nan")) >= thr]
+        wrong = sum(r["e_R"] > MAX_E_R or r["e_t"] > MAX_E_T for r in gone)
+        far = sum(r["e_R"] > FAR_DEG for r in gone)
+        print(f"  least p {thr}: refuses {len(gone)}, of them wrong {wrong}, > 90 deg {far}")
+    for name, r in sorted(regs, key=lambda x: x[1].get("flip_prob", 2.0)):
+        print(f"{name:28s} {r['frame']} p {r.get('flip_prob', float('nan')):.3f} e_R {r['e_R']:6.1f} "
+              f"e_t {r['e_t']:.2f} chamfer {r['outline_chamfer_px']:.2f}")
+
+
+if __name__ == "__main__":
+    main()

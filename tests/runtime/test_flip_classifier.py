@@ -155,8 +155,9 @@ def _flip_estimator(tmp_path, monkeypatch, prob, silhouette=None, *, registratio
     from spacepose.calibration.rig import paper_rig
     from spacepose.estimator import PoseEstimator
 
-    est = _estimator(tmp_path, registration or {"min_margin": 0.99}, {"max_chamfer_px": 1.0, "min_margin_px": 0.5, "image_vote": 1,
-                                                      "image_veto_score": 0.0, **(silhouette or {})})
+    est = _estimator(tmp_path, registration or {"min_margin": 0.99},
+                     {"max_chamfer_px": 1.0, "min_margin_px": 0.5, "image_vote": 1, "image_veto_score": 0.0,
+                      **(silhouette or {})})
     data = json.loads((est.bundle.path / "bundle.json").read_text())
     data["flip_classifier"] = {"size": SIZE, "decide_prob": 0.9, "veto_prob": 0.1, "max_chamfer_px": 1.5, **section}
     (est.bundle.path / "bundle.json").write_text(json.dumps(data))
