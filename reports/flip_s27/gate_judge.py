@@ -5,12 +5,14 @@ on the shipped bundle S).
 
 RUNS (default ``runs/s27``) holds ``g_{S,R}_{0,675}/pose_eval.json`` (``eval-pose`` of data/tdrs640_s27g, train
 frames 0-674 and 675-1349, with S and with S + R) and ``seq_kK_{S,R}.json`` (``sequence eval`` of data/seq_kK,
-K = 1..10). When they are all there, their frames are cut to the columns counted here and written to
+K = 1..10), and ``{test,unseen}_{S,R}/pose_eval.json`` (the test split and the unseen 1280x960 set re-measured
+with R, reported after the verdict). When they are all there, their frames are cut to the columns counted here and written to
 ``gate_rows.json.gz`` / ``gate_rows_sequences.json.gz`` beside this script; otherwise those committed files are
 read.
 """
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -21,6 +23,7 @@ from _rows import compact_rows  # noqa: E402
 MAX_E_T, MAX_E_R, FAR_DEG, MIN_PROB = 0.5, 20.0, 90.0, 0.9
 KEYS = ("frame", "regime", "distance", "valid", "status", "e_t", "e_R", "decided_by", "flip_prob")
 SEQ_KEYS = ("frame", "valid", "status", "tracked", "e_t", "e_R", "decided_by")
+REMEASURE_KEYS = (*KEYS, "position_valid", "e_pos")
 SEQUENCES = [f"seq_k{k}" for k in range(1, 11)]
 
 
@@ -39,7 +42,9 @@ def load(runs: Path) -> dict[str, list[dict]]:
                           HERE / "gate_rows.json.gz", KEYS)
     seqs = compact_rows({f"{n}_{b}": [runs / f"{n}_{b}.json"] for n in SEQUENCES for b in "SR"},
                         HERE / "gate_rows_sequences.json.gz", SEQ_KEYS)
-    return {**single, **seqs}
+    remeasure = compact_rows({f"{n}_{b}": [runs / f"{n}_{b}" / "pose_eval.json"] for n in ("test", "unseen")
+                              for b in "SR"}, HERE / "gate_rows_remeasure.json.gz", REMEASURE_KEYS)
+    return {**single, **seqs, **remeasure}
 
 
 def main(runs: Path) -> int:
@@ -77,6 +82,11 @@ def main(runs: Path) -> int:
           f"{'met' if ok2 else 'NOT met'}")
     verdict = ok1 and ok2 and same
     print("verdict:", "met: ship R" if verdict else "NOT met: R does not ship")
+    for name in ("test", "unseen"):
+        a, b = rows[f"{name}_S"], rows[f"{name}_R"]
+        same_frames = json.dumps(a) == json.dumps(b)   # NaN-safe, unlike ==
+        print(f"re-measured, {name}: {sum(x['valid'] for x in b)} of {len(b)} valid with R; every column the same as "
+              f"without it: {same_frames}")
     return 0 if verdict else 1
 
 
