@@ -5,9 +5,9 @@ on the shipped bundle S).
 
 RUNS (default ``runs/s27``) holds ``g_{S,R}_{0,675}/pose_eval.json`` (``eval-pose`` of data/tdrs640_s27g, train
 frames 0-674 and 675-1349, with S and with S + R) and ``seq_kK_{S,R}.json`` (``sequence eval`` of data/seq_kK,
-K = 1..10), and ``{test,unseen}_{S,R}/pose_eval.json`` (the test split and the unseen 1280x960 set re-measured
-with R, reported after the verdict). When they are all there, their frames are cut to the columns counted here and written to
-``gate_rows.json.gz`` / ``gate_rows_sequences.json.gz`` beside this script; otherwise those committed files are
+K = 1..10), and ``{test,unseen}_{S,R}/pose_eval.json`` (the test split and the unseen 1280x960 set
+re-measured with R, reported after the verdict). When they are all there, their frames are cut to the columns
+counted here and written to ``gate_rows.json.gz`` / ``gate_rows_sequences.json.gz`` beside this script; otherwise those committed files are
 read.
 """
 from __future__ import annotations
@@ -19,16 +19,13 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "position_s25"))
 from _rows import compact_rows  # noqa: E402
+from judge import FAR_DEG, wrong  # noqa: E402  (this folder: plan.txt's judge)
 
-MAX_E_T, MAX_E_R, FAR_DEG, MIN_PROB = 0.5, 20.0, 90.0, 0.9
+MIN_PROB = 0.9
 KEYS = ("frame", "regime", "distance", "valid", "status", "e_t", "e_R", "decided_by", "flip_prob")
 SEQ_KEYS = ("frame", "valid", "status", "tracked", "e_t", "e_R", "decided_by")
 REMEASURE_KEYS = (*KEYS, "position_valid", "e_pos")
 SEQUENCES = [f"seq_k{k}" for k in range(1, 11)]
-
-
-def wrong(r: dict) -> bool:
-    return r["e_R"] > MAX_E_R or r["e_t"] > MAX_E_T
 
 
 def refused_by_r(r: dict) -> bool:

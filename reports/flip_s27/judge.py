@@ -43,10 +43,15 @@ def load(runs: Path) -> dict[str, list[dict]]:
     return {**singles, **seqs, **reported}
 
 
+def wrong(r: dict) -> bool:
+    """A valid pose off by more than 20 deg or 0.5 m (this session's scripts count with this one test)."""
+    return r["e_R"] > MAX_E_R or r["e_t"] > MAX_E_T
+
+
 def tally(frames: list[dict]) -> dict[str, int]:
     valid = [r for r in frames if r["valid"]]
-    wrong = sum(r["e_R"] > MAX_E_R or r["e_t"] > MAX_E_T for r in valid)
-    return dict(n=len(frames), valid=len(valid), wrong=wrong, far=sum(r["e_R"] > FAR_DEG for r in valid))
+    return dict(n=len(frames), valid=len(valid), wrong=sum(map(wrong, valid)),
+                far=sum(r["e_R"] > FAR_DEG for r in valid))
 
 
 def far_keys(frames: list[dict], tag: str) -> set:

@@ -13,7 +13,7 @@ import glob
 import gzip
 import json
 
-MAX_E_T, MAX_E_R, FAR_DEG = 0.5, 20.0, 90.0
+from judge import FAR_DEG, wrong  # this folder: plan.txt's judge
 
 
 def sources() -> list[str]:
@@ -44,9 +44,8 @@ def main() -> None:
     print(f"sets {n_sets}, valid poses {n_valid}, by the registration route {len(regs)}")
     for thr in (0.5, 0.7, 0.8, 0.9, 0.95, 0.99):
         gone = [r for _, r in regs if not r.get("flip_prob", float("nan")) >= thr]
-        wrong = sum(r["e_R"] > MAX_E_R or r["e_t"] > MAX_E_T for r in gone)
         far = sum(r["e_R"] > FAR_DEG for r in gone)
-        print(f"  least p {thr}: refuses {len(gone)}, of them wrong {wrong}, > 90 deg {far}")
+        print(f"  least p {thr}: refuses {len(gone)}, of them wrong {sum(map(wrong, gone))}, > 90 deg {far}")
     for name, r in sorted(regs, key=lambda x: x[1].get("flip_prob", 2.0)):
         print(f"{name:28s} {r['frame']} p {r.get('flip_prob', float('nan')):.3f} e_R {r['e_R']:6.1f} "
               f"e_t {r['e_t']:.2f} chamfer {r['outline_chamfer_px']:.2f}")
