@@ -125,10 +125,11 @@ class PoseResult:
             ``silhouette.max_chamfer_px``, else of the registered pose (with ``registration.position_lateral``
             moved parallel to the image plane so that its outline's centroid is the observed one's). A
             navigation filter can use the relative position on such frames without the attitude (``valid``
-            stays false: the attitude is unknown up to the flip). Only where the frame's ``depth_tolerance_m`` is at most the bundle's
-            ``registration.position_max_tau_m`` (0, the default: only with a valid pose), and, with
-            ``registration.position_max_chamfer_px``, where the outline's best fit is within it. Accuracy: the
-            model card, "Target position without attitude" and "The position of a frame without a pose".
+            stays false: the attitude is unknown up to the flip). Only where the frame's ``depth_tolerance_m``
+            is at most the bundle's ``registration.position_max_tau_m`` (0, the default: only with a valid
+            pose), and, with ``registration.position_max_chamfer_px``, where the outline's best fit is within
+            it. Accuracy: the model card, "Target position without attitude" and "The position of a frame
+            without a pose".
             In the JSON line since session 25.
         tracked: the pose was decided by the prior, the last valid pose at most ``prior_max_gap``
             frames back (registration with ``use_prior``: the frame alone could not tell the pose
