@@ -48,6 +48,11 @@ A bundle is a folder::
                           "decide_prob": 0.97, "veto_prob": 0.1},   # optional, needs silhouette: a
                                        # graph that tells the outline's winner from its flip in the
                                        # left image (spacepose.flip_classifier.FlipClassifierConfig)
+      "uncertainty": {"range_k": 0.3, "lateral_px": 0.5, "lateral_floor_m": 0.02,
+                      "rotation_k_deg": 20.0, "rotation_floor_deg": 0.0,
+                      "rotation_chamfer_deg": 1.5},   # optional, needs
+                                       # registration: a valid pose's position covariance and
+                                       # rotation sigma (spacepose.uncertainty.UncertaintyConfig)
       "rig": {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0},
       "distance_range_m": [10.0, 50.0],
       "dataset": {"seed": 0, "size": 10000},
@@ -78,6 +83,7 @@ import numpy as np
 
 from .errors import BundleError
 from .flip_classifier import FlipClassifierConfig, parse_flip_classifier
+from .uncertainty import UncertaintyConfig, parse_uncertainty
 from .pose_inputs import PoseInputSpec
 from .registration import RegistrationConfig
 from .roi import COARSE_TILE_OVERLAP_PX, WINDOW_DISPARITY_FILL
@@ -214,6 +220,8 @@ class ModelBundle:
         silhouette: outline-stage settings, ``None`` when the bundle does not use it.
         flip_classifier: the optional flip graph's section (:mod:`spacepose.flip_classifier`), ``None``
             when the bundle has none.
+        uncertainty: the optional per-frame uncertainty model (:mod:`spacepose.uncertainty`), ``None``
+            when the bundle has none (no covariance is then reported).
         stereo, pose, voting: graph and voting configs; ``rig``: the training rig.
         distance_range_m: (near, far) target distance the graphs were trained for.
         dataset_seed, dataset_size, training_commit, metrics: provenance and measured numbers.
@@ -243,6 +251,7 @@ class ModelBundle:
     silhouette_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     silhouette: SilhouetteConfig | None = None
     flip_classifier: FlipClassifierConfig | None = None
+    uncertainty: UncertaintyConfig | None = None
     graph_metadata: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     @property
@@ -644,6 +653,7 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         silhouette_points=_frozen(outline),
         silhouette=_parse_silhouette(data.get("silhouette"), len(outline), data.get("registration") is not None),
         flip_classifier=_parse_flip(data),
+        uncertainty=_parse_uncertainty(data),
     )
 
 
@@ -651,6 +661,13 @@ def _parse_flip(data: Mapping[str, Any]) -> FlipClassifierConfig | None:
     config = parse_flip_classifier(data.get("flip_classifier"))
     if config is not None and data.get("silhouette") is None:
         raise BundleError("bundle.json: flip_classifier needs a silhouette section (it judges the outline's winner)")
+    return config
+
+
+def _parse_uncertainty(data: Mapping[str, Any]) -> UncertaintyConfig | None:
+    config = parse_uncertainty(data.get("uncertainty"))
+    if config is not None and data.get("registration") is None:
+        raise BundleError("bundle.json: uncertainty needs a registration section (its depth tolerance scales the range)")
     return config
 
 

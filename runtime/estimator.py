@@ -54,6 +54,7 @@ from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
 from .silhouette import align_centroid, decide_outline, polish_pose
+from .uncertainty import pose_uncertainty
 
 __all__ = ["PoseResult", "PoseEstimator", "DECISION_ROUTES", "rotation_to_quaternion", "pose_crop_window",
            "refine_icp"]
@@ -131,6 +132,12 @@ class PoseResult:
             it. Accuracy: the model card, "Target position without attitude" and "The position of a frame
             without a pose".
             In the JSON line since session 25.
+        position_cov: (3, 3) covariance of ``position`` (m^2, camera frame) for a valid pose, from the
+            bundle's ``uncertainty`` model (:mod:`spacepose.uncertainty`: long along the line of sight,
+            where the stereo depth is coarse); NaN without a valid pose, a depth tolerance or that section.
+            ``sigma_rotation_deg``: the per-axis standard deviation of the attitude's error (degrees), NaN
+            likewise and where the model needs the outline's chamfer and there is none. In the JSON line since session 28 (``null`` where NaN). Measured coverage: the model
+            card, "Per-frame uncertainty".
         tracked: the pose was decided by the prior, the last valid pose at most ``prior_max_gap``
             frames back (registration with ``use_prior``: the frame alone could not tell the pose
             from its flip). In the JSON line since session 13 (a key beyond the CONVENTIONS.md ones).
@@ -183,6 +190,8 @@ class PoseResult:
     decided_by: str = ""
     position: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     position_valid: bool = False
+    position_cov: np.ndarray = field(default_factory=lambda: np.full((3, 3), np.nan))
+    sigma_rotation_deg: float = float("nan")
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -208,6 +217,8 @@ class PoseResult:
                                   else None),
             "position": clean(np.asarray(self.position)),
             "position_valid": bool(self.position_valid),
+            "position_cov": clean(np.asarray(self.position_cov)) if np.all(np.isfinite(self.position_cov)) else None,
+            "sigma_rotation_deg": float(self.sigma_rotation_deg) if math.isfinite(self.sigma_rotation_deg) else None,
         })
         if self.detail:
             out["detail"] = self.detail
@@ -507,6 +518,12 @@ class PoseEstimator:
                             flip_prob=factor("flip_prob"), decided=stage.decided if valid else None,
                             decided_by=_route_name(factors) if valid else "",
                             position=position, position_valid=position_valid)
+        if valid and self.bundle.uncertainty is not None:
+            spread = pose_uncertainty(position, result.depth_tolerance_m, self.focal_px, self.bundle.uncertainty,
+                                      result.outline_chamfer_px)
+            if spread is not None:
+                result = dataclasses.replace(result, position_cov=spread.position_cov,
+                                             sigma_rotation_deg=spread.sigma_rotation_deg)
         if status == "bad_input":  # a bad frame says nothing about where the target is: the prior stays as it was
             return result
         with self._lock:

@@ -34,7 +34,7 @@ from spacepose.imageio import read_image, write_image
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FLIP_DEG", "DISTANCE_BIN_M", "evaluate_pose", "summarise", "confidence_table", "distance_bin",
+__all__ = ["FLIP_DEG", "DISTANCE_BIN_M", "evaluate_pose", "predicted_sigmas", "summarise", "confidence_table", "distance_bin",
            "format_tables", "save_scatter", "draw_box_overlay", "write_report", "model_points"]
 
 FLIP_DEG = 90.0
@@ -65,6 +65,19 @@ def _errors(R: np.ndarray, t: np.ndarray, R_hat: np.ndarray, t_hat: np.ndarray, 
 
     return {"e_t": translation_error(t, t_hat), "e_R": rotation_error_deg(R, R_hat), "add": add(R, t, R_hat, t_hat, pts),
             "speed": speed_score(R, t, R_hat, t_hat)}
+
+
+def predicted_sigmas(result: Any) -> dict[str, float]:
+    """The result's predicted sigmas (:mod:`spacepose.uncertainty`): along and across the line of sight to
+    its position (from ``position_cov``) and of the rotation; NaN where it has none."""
+    cov, pos = np.asarray(result.position_cov, dtype=np.float64), np.asarray(result.position, dtype=np.float64)
+    if not (np.all(np.isfinite(cov)) and np.all(np.isfinite(pos)) and np.linalg.norm(pos) > 0):
+        return {"sigma_range_m": float("nan"), "sigma_lateral_m": float("nan"), "sigma_rotation_deg": float("nan")}
+    u = pos / np.linalg.norm(pos)
+    along = float(u @ cov @ u)
+    return {"sigma_range_m": math.sqrt(max(along, 0.0)),
+            "sigma_lateral_m": math.sqrt(max((float(np.trace(cov)) - along) / 2.0, 0.0)),
+            "sigma_rotation_deg": float(result.sigma_rotation_deg)}
 
 
 def _nanstat(fn: Callable, values: list[float]) -> float:
@@ -122,8 +135,10 @@ def _grouped(rows: list[dict[str, Any]]) -> dict[str, Any]:
     for r in rows:
         groups.setdefault(f"regime:{r['regime']}", []).append(r)
         groups.setdefault(f"distance:{distance_bin(r['distance'])}", []).append(r)
+    from spacepose.tools.calibrate_uncertainty import coverage, pose_errors
+
     return {"overall": summarise(rows), **{k: summarise(v) for k, v in sorted(groups.items())},
-            "confidence": confidence_table(rows)}
+            "confidence": confidence_table(rows), "uncertainty": coverage(pose_errors(rows))}
 
 
 def draw_box_overlay(image: np.ndarray, K: np.ndarray, corners: np.ndarray, poses: list[tuple[np.ndarray, np.ndarray, tuple]],
@@ -257,7 +272,7 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
                "flip_prob": float(result.flip_prob), "decided_by": result.decided_by,
                "position_valid": bool(result.position_valid), "e_pos": e_pos, "e_pos_los": e_pos_los,
                "position": np.asarray(result.position).tolist(),
-               "R": np.asarray(result.R).tolist(), "t": np.asarray(result.t).tolist()}
+               **predicted_sigmas(result), "R": np.asarray(result.R).tolist(), "t": np.asarray(result.t).tolist()}
         rows.append(row)
         if classical is not None:
             R_c, t_c, valid_c = classical(left, right)
@@ -273,7 +288,8 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
             write_image(overlay_dir / f"{rec.frame}.jpg", img, jpeg_quality=90)
         if progress:
             progress(i + 1, len(records))
-    return {"dataset": str(root), "bundle": str(model.path), "split": split, "refine": bool(refine), "frames": rows,
+    return {"dataset": str(root), "bundle": str(model.path), "split": split, "refine": bool(refine),
+            "focal_px": float(rect.focal_px), "frames": rows,
             "ours": _grouped(rows),
             "baseline": _grouped(base_rows) if base_rows else None, "baseline_name": baseline,
             "baseline_frames": base_rows}
@@ -297,7 +313,7 @@ def format_tables(report: dict[str, Any]) -> str:
         label = name if name == "ours" else f"baseline ({report.get('baseline_name')})"
         lines += [f"### {label}", "", "| group | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
         for group, stats in block.items():
-            if group == "confidence":
+            if group in ("confidence", "uncertainty"):
                 continue
             lines.append(f"| {group} | " + " | ".join(_fmt(stats.get(c, float("nan"))) for c in cols) + " |")
         lines.append("")
@@ -307,6 +323,11 @@ def format_tables(report: dict[str, Any]) -> str:
                       "|---" * len(ccols) + "|"]
             lines += ["| " + " | ".join(_fmt(b[c]) for c in ccols) + " |" for b in block["confidence"]]
             lines.append("")
+        if (block.get("uncertainty") or {}).get("poses"):
+            from spacepose.tools.calibrate_uncertainty import format_coverage
+
+            lines += ["predicted uncertainty (share within, normal's in brackets; spearman: errors vs sigmas)", "",
+                      format_coverage("valid poses", block["uncertainty"]), ""]
     return "\n".join(lines)
 
 

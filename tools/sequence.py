@@ -92,6 +92,16 @@ def _longest_run(flags: list[bool]) -> int:
     return best
 
 
+def _position_errors(rec: Any, res: Any, centre: np.ndarray) -> dict[str, float]:
+    """``e_pos`` (m) of the reported target centre and ``e_pos_los``, its signed part along the line of sight
+    (as :func:`spacepose.tools.eval_pose.evaluate_pose` records them); NaN without a position."""
+    if not res.position_valid:
+        return {"e_pos": float("nan"), "e_pos_los": float("nan")}
+    true = np.asarray(rec.R, dtype=np.float64) @ centre + np.asarray(rec.t, dtype=np.float64)
+    miss = np.asarray(res.position, dtype=np.float64) - true
+    return {"e_pos": float(np.linalg.norm(miss)), "e_pos_los": float(miss @ true / np.linalg.norm(true))}
+
+
 def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, threads: int = 2,
                       prior_max_gap: int | None = None, position_window: bool = False) -> dict[str, Any]:
     """Run the estimator over the sequence in order with ``use_prior`` (and ``prior_max_gap``, default
@@ -100,6 +110,7 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
     from spacepose.estimator import PoseEstimator
     from spacepose.imageio import read_image
     from spacepose.metrics import rotation_error_deg, translation_error
+    from spacepose.tools.eval_pose import predicted_sigmas
     from spacepose.tools.pose_data import read_pose_labels
 
     root = Path(folder)
@@ -108,6 +119,7 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
     if position_window:
         extra["position_window"] = True
     est = PoseEstimator(load_rig(root / "rig.yaml"), bundle=bundle, threads=threads, use_prior=True, **extra)
+    centre = np.asarray(est.bundle.centre, dtype=np.float64)
     rows = []
     for rec in records:
         res = est.estimate(read_image(root / "left" / f"{rec.frame}.png"), read_image(root / "right" / f"{rec.frame}.png"))
@@ -118,7 +130,8 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
                "outline_chamfer_px": float(res.outline_chamfer_px), "outline_margin_px": float(res.outline_margin_px),
                "outline_image_score": float(res.outline_image_score), "decided_by": res.decided_by,
                "position_valid": bool(res.position_valid), "stereo_ms": float(res.timings_ms.get("stereo", float("nan"))),
-               "detail": res.detail}
+               "depth_tolerance_m": float(res.depth_tolerance_m), "position": np.asarray(res.position).tolist(),
+               **_position_errors(rec, res, centre), **predicted_sigmas(res), "detail": res.detail}
         rows.append(row)
     valid = [r for r in rows if r["valid"]]
     first = next((i for i, r in enumerate(rows) if r["valid"]), None)

@@ -41,7 +41,11 @@ def test_render_and_evaluate_a_short_sequence(tmp_path, capsys):
     report = evaluate_sequence(out, threads=1)    # the shipped bundle, run in order with use_prior
     s = report["summary"]
     assert s["frames"] == 3 and 0 <= s["valid"] <= 3 and s["flips"] <= s["valid"]
-    assert {"status", "tracked", "e_t", "e_R", "flip_margin"} <= set(report["frames"][0])
+    assert {"status", "tracked", "e_t", "e_R", "flip_margin", "e_pos", "e_pos_los", "depth_tolerance_m",
+            "sigma_range_m", "sigma_rotation_deg"} <= set(report["frames"][0])
+    for r in report["frames"]:   # the line-of-sight part of the centre's miss is a part of it
+        assert (r["position_valid"] and abs(r["e_pos_los"]) <= r["e_pos"] + 1e-12) or (
+            not r["position_valid"] and np.isnan(r["e_pos"]))
     assert main(["eval", str(out), "--threads", "1", "--json", str(tmp_path / "r.json"), "--prior-max-gap", "0"]) == 0
     assert json.loads((tmp_path / "r.json").read_text())["summary"]["frames"] == 3
     assert "summary:" in capsys.readouterr().out

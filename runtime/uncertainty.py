@@ -1,0 +1,132 @@
+"""How far off a reported pose is likely to be: a per-frame position covariance and rotation sigma.
+
+A navigation filter weighs each measurement by its covariance. The pose's error grows with the
+distance and has a known shape (session 28, ``reports/uncertainty_s28``): most of the position error
+lies along the line of sight, where the stereo depth is coarse, and grows with the registration's
+depth tolerance ``tau = z^2 sigma_d / (f B)`` (:class:`spacepose.registration.RegistrationResult`);
+across it the error is a fraction of a pixel at the target's range; the rotation error grows with
+``z / f``, the metres a pixel spans there. The model (the ``uncertainty`` section of ``bundle.json``,
+:class:`UncertaintyConfig`)::
+
+    sigma_range   = range_k * tau
+    sigma_lateral = sqrt(lateral_floor_m^2 + (lateral_px * z / f)^2)      each axis across the line of sight
+    sigma_rot     = sqrt(rotation_floor_deg^2 + (rotation_k_deg * z / f)^2
+                         + (rotation_chamfer_deg * chamfer_px)^2)           each axis of the rotation error
+
+with ``z`` the distance to the target's centre, ``f`` the rectified focal length (pixels) and ``chamfer_px``
+the outline stage's fit (:attr:`spacepose.estimator.PoseResult.outline_chamfer_px`, in pixels of a view of
+fixed size, so scale-free): a pose whose outline fits loosely is turned further off (on the fit frames of
+session 28, e_R ranked with the chamfer at 0.49 and with the distance at 0.17). The
+position covariance, in the camera frame (m^2), is ``sigma_range^2 u u^T + sigma_lateral^2 (I - u u^T)``
+with ``u`` the unit line of sight. Every term scales with the rig (``tau``, ``f``), so a rig the
+constants were not fitted on gets sigmas in proportion.
+
+The constants are fitted by :mod:`spacepose.tools.calibrate_uncertainty` on training frames, never
+by hand. The errors have heavier tails than a normal distribution: read the measured coverage in the
+model card before trusting a 3-sigma bound.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any, Mapping
+
+import numpy as np
+
+from .errors import BundleError, check_shape
+
+__all__ = ["UncertaintyConfig", "PoseUncertainty", "pose_uncertainty", "parse_uncertainty"]
+
+
+@dataclass(frozen=True)
+class UncertaintyConfig:
+    """The ``uncertainty`` section of ``bundle.json`` (module docstring for the model).
+
+    range_k: sigma of the range error per metre of depth tolerance (> 0).
+    lateral_px, lateral_floor_m: the cross-range sigma, in pixels at the target's range and a floor (m).
+    rotation_k_deg, rotation_floor_deg: the per-axis rotation sigma, degrees per unit ``z / f`` and a
+        floor (degrees).
+    rotation_chamfer_deg: degrees of rotation sigma per pixel of the outline fit's chamfer (0: no such
+        term; otherwise no rotation sigma is given without a finite chamfer).
+    """
+
+    range_k: float
+    lateral_px: float
+    lateral_floor_m: float
+    rotation_k_deg: float
+    rotation_floor_deg: float
+    rotation_chamfer_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not math.isfinite(value) or value < 0.0:
+                raise ValueError(f"uncertainty.{f.name} must be finite and >= 0, got {value!r}")
+        if self.range_k <= 0.0:
+            raise ValueError(f"uncertainty.range_k must be > 0, got {self.range_k!r}")
+        if self.lateral_px == 0.0 and self.lateral_floor_m == 0.0:
+            raise ValueError("uncertainty: lateral_px and lateral_floor_m cannot both be 0 (a singular covariance)")
+        if self.rotation_k_deg == 0.0 and self.rotation_floor_deg == 0.0 and self.rotation_chamfer_deg == 0.0:
+            raise ValueError("uncertainty: rotation_k_deg, rotation_floor_deg and rotation_chamfer_deg cannot all be 0")
+
+
+@dataclass(frozen=True)
+class PoseUncertainty:
+    """``position_cov`` (3, 3): covariance of the position (m^2, camera frame); ``sigma_range_m``,
+    ``sigma_lateral_m``: its standard deviations along and across the line of sight;
+    ``sigma_rotation_deg``: per-axis standard deviation of the rotation error (degrees; NaN when the model
+    needs the outline's chamfer and it is not finite)."""
+
+    position_cov: np.ndarray
+    sigma_range_m: float
+    sigma_lateral_m: float
+    sigma_rotation_deg: float
+
+
+def pose_uncertainty(position: np.ndarray, tau_m: float, focal_px: float, config: UncertaintyConfig,
+                     chamfer_px: float = float("nan")) -> PoseUncertainty | None:
+    """The uncertainty of a pose whose target centre is at ``position`` (3,) in the camera frame,
+    registered with depth tolerance ``tau_m`` (metres), seen with focal length ``focal_px``, whose outline
+    fit has chamfer ``chamfer_px`` (outline px; NaN: none).
+
+    ``None`` when an input is not finite or not positive (no uncertainty can be given).
+    """
+    check_shape(position, (3,), "position")
+    p = np.asarray(position, dtype=np.float64)
+    z = float(np.linalg.norm(p))
+    if not (np.all(np.isfinite(p)) and z > 0.0 and math.isfinite(tau_m) and tau_m > 0.0
+            and math.isfinite(focal_px) and focal_px > 0.0):
+        return None
+    u = p / z
+    ratio = z / float(focal_px)
+    s_range = config.range_k * float(tau_m)
+    s_lat = math.hypot(config.lateral_floor_m, config.lateral_px * ratio)
+    if config.rotation_chamfer_deg > 0.0 and not math.isfinite(chamfer_px):
+        s_rot = float("nan")
+    else:
+        chamfer_term = config.rotation_chamfer_deg * float(chamfer_px) if config.rotation_chamfer_deg > 0.0 else 0.0
+        s_rot = math.sqrt(config.rotation_floor_deg ** 2 + (config.rotation_k_deg * ratio) ** 2 + chamfer_term ** 2)
+    along = np.outer(u, u)
+    cov = s_range ** 2 * along + s_lat ** 2 * (np.eye(3) - along)
+    return PoseUncertainty(position_cov=cov, sigma_range_m=s_range, sigma_lateral_m=s_lat, sigma_rotation_deg=s_rot)
+
+
+def parse_uncertainty(section: Any) -> UncertaintyConfig | None:
+    """The bundle's ``uncertainty`` section (``None`` when absent); BundleError when malformed."""
+    if section is None:
+        return None
+    if not isinstance(section, Mapping):
+        raise BundleError(f"bundle.json: uncertainty must be an object, got {type(section).__name__}")
+    names = [f.name for f in fields(UncertaintyConfig)]
+    unknown = sorted(set(section) - set(names))
+    missing = [n for n in names if n not in section and n != "rotation_chamfer_deg"]   # that one is optional
+    if unknown or missing:
+        raise BundleError(f"bundle.json: uncertainty has unknown keys {unknown} / lacks {missing}")
+    for key, value in section.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise BundleError(f"bundle.json: uncertainty.{key} must be a number, got {value!r}")
+    try:
+        return UncertaintyConfig(**{k: float(v) for k, v in section.items()})
+    except ValueError as err:
+        raise BundleError(f"bundle.json: {err}") from err

@@ -1,0 +1,126 @@
+"""Tests of spacepose.tools.calibrate_uncertainty and the sigmas eval-pose records."""
+
+import json
+import math
+import types
+
+import numpy as np
+import pytest
+
+from spacepose.tools.calibrate_uncertainty import NOMINAL, coverage, fit_uncertainty, main, pose_errors, wrong_poses
+from spacepose.uncertainty import UncertaintyConfig, pose_uncertainty
+
+TRUE = UncertaintyConfig(range_k=0.2, lateral_px=1.0, lateral_floor_m=0.02, rotation_k_deg=40.0, rotation_floor_deg=0.8,
+                         rotation_chamfer_deg=1.5)
+FOCAL = 800.0
+
+
+def _rows(config, n=4000, seed=0, focal=FOCAL):
+    """eval-pose rows of valid poses whose errors are drawn from ``config``'s normal model."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for _ in range(n):
+        z = rng.uniform(10.0, 50.0)
+        tau = max(0.15, z ** 2 * 0.25 / (focal * 1.0))
+        chamfer = rng.uniform(0.4, 2.5)
+        spread = pose_uncertainty(np.array([0.0, 0.0, z]), tau, focal, config, chamfer)
+        e_range = rng.normal(0.0, spread.sigma_range_m)
+        e_lat = np.linalg.norm(rng.normal(0.0, spread.sigma_lateral_m, 2))
+        e_R = np.linalg.norm(rng.normal(0.0, spread.sigma_rotation_deg, 3))
+        rows.append({"valid": True, "depth_tolerance_m": tau, "position": [0.0, 0.0, z + e_range],
+                     "e_pos_los": e_range, "e_pos": math.hypot(e_range, e_lat), "e_R": e_R,
+                     "outline_chamfer_px": chamfer})
+    rows.append({"valid": False, "depth_tolerance_m": float("nan"), "position": [float("nan")] * 3,
+                 "e_pos_los": float("nan"), "e_pos": float("nan"), "e_R": float("nan")})
+    return rows
+
+
+def test_the_fit_recovers_the_constants_of_a_normal_model():
+    err = pose_errors(_rows(TRUE), FOCAL)
+    assert len(err["range"]) == 4000          # the invalid row is left out
+    fit = fit_uncertainty(err)
+    assert fit.range_k == pytest.approx(TRUE.range_k, rel=0.1)
+    assert fit.lateral_px == pytest.approx(TRUE.lateral_px, rel=0.15)
+    assert fit.rotation_k_deg == pytest.approx(TRUE.rotation_k_deg, rel=0.2)
+    assert fit.rotation_chamfer_deg == pytest.approx(TRUE.rotation_chamfer_deg, rel=0.2)
+    assert fit.rotation_floor_deg == pytest.approx(TRUE.rotation_floor_deg, abs=0.6)
+    cov = coverage(pose_errors(_rows(TRUE, seed=1), FOCAL), fit, FOCAL)
+    for key, share in NOMINAL.items():
+        assert cov[key] == pytest.approx(share, abs=0.04), key
+    assert cov["wrong"] <= 8            # a normal's tails beyond 0.5 m / 20 degrees: about 0.1 % here
+    assert cov["spearman_position"] > 0.2 and cov["spearman_rotation"] > 0.2
+
+
+def test_wrong_poses_do_not_widen_the_fit_and_stand_out_of_it():
+    rows = _rows(TRUE)
+    before = pose_errors(rows, FOCAL)
+    clean = fit_uncertainty(before)
+    for r in rows[:60]:   # 1.5 % flips and 2 m misses
+        r["e_R"], r["e_pos_los"], r["e_pos"] = 175.0, 2.0, 2.0
+    err = pose_errors(rows, FOCAL)
+    wrong = wrong_poses(err)
+    assert wrong[:60].all() and wrong[60:].sum() == wrong_poses(before)[60:].sum()
+    fit = fit_uncertainty(err)
+    for key in ("range_k", "lateral_px", "rotation_k_deg", "rotation_chamfer_deg"):
+        assert getattr(fit, key) == pytest.approx(getattr(clean, key), rel=0.05), key
+    cov = coverage(err, clean, FOCAL)
+    assert cov["wrong"] == wrong.sum() and cov["wrong_flagged"] > 0.9 and cov["right_flagged"] < 0.02
+    for key in ("nees_range", "nees_lateral", "nees_rotation"):   # a consistent covariance: about 1 per axis
+        assert cov[key] == pytest.approx(1.0, abs=0.1), key
+
+
+def test_coverage_sees_sigmas_that_are_too_small():
+    tight = UncertaintyConfig(range_k=0.1, lateral_px=0.3, lateral_floor_m=0.005, rotation_k_deg=10.0,
+                              rotation_floor_deg=0.2, rotation_chamfer_deg=0.4)
+    cov = coverage(pose_errors(_rows(TRUE), FOCAL), tight, FOCAL)
+    assert cov["range_1"] < 0.4 and cov["lateral_1"] < 0.2 and cov["rotation_median"] < 0.3
+
+
+def test_coverage_of_the_recorded_sigmas_matches_the_recomputed_one():
+    rows = _rows(TRUE, n=300)
+    for r in rows:
+        if r["valid"]:
+            spread = pose_uncertainty(np.asarray(r["position"]), r["depth_tolerance_m"], FOCAL, TRUE,
+                                      r["outline_chamfer_px"])
+            r.update(sigma_range_m=spread.sigma_range_m, sigma_lateral_m=spread.sigma_lateral_m,
+                     sigma_rotation_deg=spread.sigma_rotation_deg)
+    err = pose_errors(rows, FOCAL)
+    assert coverage(err) == pytest.approx(coverage(err, TRUE, FOCAL), nan_ok=True)
+    assert coverage(pose_errors(_rows(TRUE, n=30), FOCAL)) == {"poses": 0}   # no recorded sigmas
+
+
+def test_too_few_poses_are_not_fitted():
+    with pytest.raises(ValueError, match="too few"):
+        fit_uncertainty(pose_errors(_rows(TRUE, n=10), FOCAL))
+
+
+def test_the_command_fits_and_writes_json(tmp_path, capsys):
+    report = tmp_path / "pose_eval.json"
+    report.write_text(json.dumps({"focal_px": FOCAL, "frames": _rows(TRUE, n=600)}))
+    out = tmp_path / "fit.json"
+    assert main([str(report), "--fit", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert set(data["fit"]) == {"range_k", "lateral_px", "lateral_floor_m", "rotation_k_deg", "rotation_floor_deg",
+                                "rotation_chamfer_deg"}
+    assert data["coverage"][str(report)]["poses"] == 600
+    assert '"uncertainty"' in capsys.readouterr().out
+    bare = tmp_path / "bare.json"
+    bare.write_text(json.dumps({"frames": _rows(TRUE, n=100)}))
+    with pytest.raises(SystemExit):
+        main([str(bare), "--fit"])                     # no focal length known
+
+
+def test_eval_pose_records_the_sigmas_along_and_across_the_line_of_sight():
+    from spacepose.tools.eval_pose import predicted_sigmas
+
+    position = np.array([2.0, 1.0, 20.0])
+    spread = pose_uncertainty(position, 0.6, FOCAL, TRUE, 1.1)
+    result = types.SimpleNamespace(position=position, position_cov=spread.position_cov,
+                                   sigma_rotation_deg=spread.sigma_rotation_deg)
+    got = predicted_sigmas(result)
+    assert got["sigma_range_m"] == pytest.approx(spread.sigma_range_m)
+    assert got["sigma_lateral_m"] == pytest.approx(spread.sigma_lateral_m)
+    assert got["sigma_rotation_deg"] == pytest.approx(spread.sigma_rotation_deg)
+    none = predicted_sigmas(types.SimpleNamespace(position=position, position_cov=np.full((3, 3), np.nan),
+                                                  sigma_rotation_deg=float("nan")))
+    assert all(math.isnan(v) for v in none.values())

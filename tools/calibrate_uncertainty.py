@@ -1,0 +1,226 @@
+"""Fit and check the per-frame uncertainty model (:mod:`spacepose.uncertainty`) on ``eval-pose`` reports.
+
+``python -m spacepose.tools.calibrate_uncertainty REPORT [REPORT ...] [--bundle DIR] [--fit] [--json OUT]``
+
+Each REPORT is an ``eval-pose`` ``pose_eval.json`` (or ``.json.gz``) of a dataset's frames; its valid
+poses give, per frame, the range error (``e_pos_los``: the reported centre's miss along the line of
+sight), the cross-range error (the rest of ``e_pos``), the rotation error ``e_R``, the registration's
+depth tolerance ``tau`` and the reported range ``z``; the report's ``focal_px`` (or ``--focal-px``) is the
+rectified focal length.
+
+* ``--fit``: the six constants (:func:`fit_uncertainty`) over the poses that are not wrong (off by more than
+  20 degrees or 0.5 m): ``range_k`` the RMS of ``e_range / tau``; the cross-range and rotation models' shapes
+  by non-negative least squares of the per-pose squared errors (on ``[1, (z/f)^2]``, and on ``[1, (z/f)^2,
+  chamfer^2]`` for the rotation), each scaled so that its normalised squared errors average 1.
+* Without it, the coverage of the constants in ``--bundle``'s ``uncertainty`` section (the shipped bundle
+  by default): the share of poses within one and two (three for the rotation) sigma-equivalents, against
+  the normal distribution's; the per-axis normalised squared errors of the poses that are not wrong (1 when
+  the covariance matches their spread); the share of right and of wrong poses beyond a 3-sigma
+  (chi-square 99.73 %) gate; the rank correlation of the errors with the predicted sigmas.
+
+Fit only on training frames; check on frames rendered after the fit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import logging
+import math
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from spacepose.uncertainty import UncertaintyConfig, pose_uncertainty
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["NOMINAL", "pose_errors", "wrong_poses", "fit_uncertainty", "coverage", "format_coverage", "main"]
+
+# a normal distribution's share within the sigma-equivalent bounds that ``coverage`` counts
+NOMINAL = {"range_1": 0.6827, "range_2": 0.9545, "lateral_1": 1.0 - math.exp(-0.5), "lateral_2": 1.0 - math.exp(-2.0),
+           "rotation_median": 0.5, "rotation_3": 0.9707}
+MAXWELL_MEDIAN = 1.5382  # median of the length of a 3-D standard normal vector
+WRONG_DEG, WRONG_M = 20.0, 0.5   # a "wrong" valid pose, as the project counts them
+CHI2_3DOF_997 = 14.156   # 99.73 % quantile of a chi-square with 3 degrees of freedom (a "3-sigma" gate)
+
+
+def _read(path: Path) -> dict[str, Any]:
+    opener = gzip.open if path.suffix == ".gz" else open
+    with opener(path, "rt") as fh:
+        return json.load(fh)
+
+
+def pose_errors(rows: Iterable[dict[str, Any]], focal_px: float | None = None) -> dict[str, np.ndarray]:
+    """Per valid pose with a depth tolerance: ``range`` (signed, m), ``lateral`` (m), ``e_R`` (deg),
+    ``tau`` (m), ``z`` (m), ``ratio`` (z / f; NaN without ``focal_px``), ``chamfer`` (the outline fit, outline
+    px) and, where the row has them, the predicted ``sigma_*`` (NaN otherwise)."""
+    keys = ("range", "lateral", "e_R", "tau", "ratio", "z", "chamfer", "sigma_range_m", "sigma_lateral_m",
+            "sigma_rotation_deg")
+    out: dict[str, list[float]] = {k: [] for k in keys}
+    for r in rows:
+        tau = float(r.get("depth_tolerance_m", float("nan")))
+        pos = np.asarray(r.get("position", [float("nan")] * 3), dtype=np.float64)
+        if not (r.get("valid") and math.isfinite(tau) and tau > 0 and np.all(np.isfinite(pos))):
+            continue
+        z = float(np.linalg.norm(pos))
+        los, e_pos = float(r["e_pos_los"]), float(r["e_pos"])
+        out["range"].append(los)
+        out["lateral"].append(math.sqrt(max(e_pos ** 2 - los ** 2, 0.0)))
+        out["e_R"].append(float(r["e_R"]))
+        out["tau"].append(tau)
+        out["ratio"].append(z / float(focal_px) if focal_px else float("nan"))
+        out["z"].append(z)
+        chamfer = r.get("outline_chamfer_px")
+        out["chamfer"].append(float("nan") if chamfer is None else float(chamfer))
+        for k in keys[-3:]:
+            out[k].append(float(r.get(k, float("nan"))))
+    return {k: np.asarray(v, dtype=np.float64) for k, v in out.items()}
+
+
+def wrong_poses(err: dict[str, np.ndarray]) -> np.ndarray:
+    """(n,) bool: the poses off by more than :data:`WRONG_DEG` or :data:`WRONG_M` (the centre's miss), the
+    project's "wrong pose" (failures the gates try to stop, not the noise a covariance describes)."""
+    return (err["e_R"] > WRONG_DEG) | (np.hypot(err["range"], err["lateral"]) > WRONG_M)
+
+
+def _scaled_nnls(features: np.ndarray, variance: np.ndarray) -> np.ndarray:
+    """Non-negative ``c`` with ``variance ~ features @ c`` (least squares over the poses), then scaled so
+    that the mean of ``variance / (features @ c)`` is 1: the squared coefficients of a consistent model."""
+    from scipy.optimize import nnls
+
+    coef, _ = nnls(features, variance)
+    predicted = features @ coef
+    if not np.all(predicted > 0):
+        raise ValueError("the fitted variance is not positive on every pose (too few or degenerate poses)")
+    return coef * float(np.mean(variance / predicted))
+
+
+def fit_uncertainty(err: dict[str, np.ndarray]) -> UncertaintyConfig:
+    """The constants of :class:`~spacepose.uncertainty.UncertaintyConfig` from :func:`pose_errors` rows, over
+    the poses that are not wrong (:func:`wrong_poses`) and have an outline chamfer: ``range_k`` the RMS of
+    ``e_range / tau``; the cross-range model's shape by non-negative least squares of ``lateral^2 / 2`` on
+    ``[1, (z/f)^2]``, the rotation's of ``e_R^2 / 3`` on ``[1, (z/f)^2, chamfer^2]`` (per-axis variances of
+    2-D and 3-D normals), each then scaled so that its mean normalised squared error is 1. The covariance
+    then matches the errors' spread (a navigation filter's normalised errors average one per axis), and
+    wrong poses stand out of it."""
+    keep = ~wrong_poses(err) & np.isfinite(err["chamfer"]) & np.isfinite(err["ratio"])
+    if keep.sum() < 25:
+        raise ValueError(f"{int(keep.sum())} valid poses (not wrong, with a chamfer) are too few to fit (need 25)")
+    e = {k: v[keep] for k, v in err.items()}
+    range_k = float(np.sqrt(np.mean((e["range"] / e["tau"]) ** 2)))
+    ones, ratio2 = np.ones(len(e["ratio"])), e["ratio"] ** 2
+    lat = _scaled_nnls(np.stack([ones, ratio2], axis=1), e["lateral"] ** 2 / 2.0)
+    rot = _scaled_nnls(np.stack([ones, ratio2, e["chamfer"] ** 2], axis=1), e["e_R"] ** 2 / 3.0)
+    return UncertaintyConfig(range_k=range_k, lateral_px=float(np.sqrt(lat[1])), lateral_floor_m=float(np.sqrt(lat[0])),
+                             rotation_k_deg=float(np.sqrt(rot[1])), rotation_floor_deg=float(np.sqrt(rot[0])),
+                             rotation_chamfer_deg=float(np.sqrt(rot[2])))
+
+
+def _spearman(a: np.ndarray, b: np.ndarray) -> float:
+    if len(a) < 3:
+        return float("nan")
+    ra, rb = np.argsort(np.argsort(a)), np.argsort(np.argsort(b))
+    return float(np.corrcoef(ra, rb)[0, 1])
+
+
+def coverage(err: dict[str, np.ndarray], config: UncertaintyConfig | None = None,
+             focal_px: float | None = None) -> dict[str, float]:
+    """Shares of the poses within the predicted sigma-equivalents (keys of :data:`NOMINAL`) and rank
+    correlations of the errors with the sigmas: those of ``config`` (recomputed from ``tau`` and ``z``
+    with ``focal_px``), or without it the ones the rows recorded (``sigma_*``; poses without any are left
+    out)."""
+    if config is not None:
+        n = len(err["range"])
+        sig = np.empty((n, 3))
+        for i in range(n):
+            spread = pose_uncertainty(np.array([0.0, 0.0, err["z"][i]]), float(err["tau"][i]), float(focal_px),
+                                      config, float(err["chamfer"][i]))
+            sig[i] = spread.sigma_range_m, spread.sigma_lateral_m, spread.sigma_rotation_deg
+        keep = np.all(np.isfinite(sig), axis=1)
+    else:
+        sig = np.stack([err["sigma_range_m"], err["sigma_lateral_m"], err["sigma_rotation_deg"]], axis=1)
+        keep = np.all(np.isfinite(sig), axis=1)
+    if not keep.any():
+        return {"poses": 0}
+    s_r, s_l, s_R = sig[keep].T
+    e_r, e_l, e_R = err["range"][keep], err["lateral"][keep], err["e_R"][keep]
+    wrong = wrong_poses({k: v[keep] for k, v in err.items()})
+    right = ~wrong
+    d2_position = (e_r / s_r) ** 2 + (e_l / s_l) ** 2
+    d2_rotation = (e_R / s_R) ** 2
+    flagged = (d2_position > CHI2_3DOF_997) | (d2_rotation > CHI2_3DOF_997)
+    return {"poses": int(keep.sum()), "wrong": int(wrong.sum()),
+            "wrong_flagged": float(np.mean(flagged[wrong])) if wrong.any() else float("nan"),
+            "right_flagged": float(np.mean(flagged[right])) if right.any() else float("nan"),
+            "nees_range": float(np.mean((e_r[right] / s_r[right]) ** 2)) if right.any() else float("nan"),
+            "nees_lateral": float(np.mean((e_l[right] / s_l[right]) ** 2) / 2.0) if right.any() else float("nan"),
+            "nees_rotation": float(np.mean((e_R[right] / s_R[right]) ** 2) / 3.0) if right.any() else float("nan"),
+            "range_1": float(np.mean(np.abs(e_r) <= s_r)),
+            "range_2": float(np.mean(np.abs(e_r) <= 2 * s_r)),
+            "lateral_1": float(np.mean(e_l <= s_l)),
+            "lateral_2": float(np.mean(e_l <= 2 * s_l)),
+            "rotation_median": float(np.mean(e_R <= MAXWELL_MEDIAN * s_R)),
+            "rotation_3": float(np.mean(e_R <= 3 * s_R)),
+            "spearman_position": _spearman(np.hypot(e_r, e_l), np.sqrt(s_r ** 2 + 2 * s_l ** 2)),
+            "spearman_rotation": _spearman(e_R, s_R),
+            "sigma_range_median_m": float(np.median(s_r)), "sigma_lateral_median_m": float(np.median(s_l)),
+            "sigma_rotation_median_deg": float(np.median(s_R))}
+
+
+def format_coverage(name: str, cov: dict[str, float]) -> str:
+    if not cov.get("poses"):
+        return f"{name}: no valid pose with a depth tolerance"
+    cells = " ".join(f"{k} {100 * cov[k]:5.1f}% ({100 * NOMINAL[k]:.1f})" for k in NOMINAL)
+    return (f"{name}: {cov['poses']} poses | {cells} | per-axis normalised squared error of the {cov['poses'] - cov['wrong']}"
+            f" not wrong (1 if consistent): range {cov['nees_range']:.2f}, lateral {cov['nees_lateral']:.2f}, rotation "
+            f"{cov['nees_rotation']:.2f} | beyond a 3-sigma gate: {100 * cov['right_flagged']:.1f}% of those, "
+            f"{100 * cov['wrong_flagged']:.0f}% of the {cov['wrong']} wrong | spearman e_t "
+            f"{cov['spearman_position']:.2f}, e_R {cov['spearman_rotation']:.2f}")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m spacepose.tools.calibrate_uncertainty", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("reports", type=Path, nargs="+", help="eval-pose pose_eval.json[.gz] files")
+    parser.add_argument("--fit", action="store_true", help="fit the constants on these reports")
+    parser.add_argument("--bundle", type=Path, default=None, help="bundle whose uncertainty section is checked")
+    parser.add_argument("--focal-px", type=float, default=None,
+                        help="rectified focal length (default: each report's focal_px)")
+    parser.add_argument("--json", type=Path, default=None, help="write the fit / coverage here")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    per_report = []
+    for path in args.reports:
+        report = _read(path)
+        focal = args.focal_px or report.get("focal_px")
+        if focal is None:
+            parser.error(f"{path} records no focal_px: pass --focal-px")
+        per_report.append((str(path), pose_errors(report["frames"], float(focal)), float(focal)))
+    out: dict[str, Any] = {"reports": [p for p, _, _ in per_report]}
+    if args.fit:
+        pooled = {k: np.concatenate([e[k] for _, e, _ in per_report]) for k in per_report[0][1]}
+        config = fit_uncertainty(pooled)
+        out["fit"] = asdict(config)
+        print(json.dumps({"uncertainty": out["fit"]}, indent=1))
+    else:
+        from spacepose.bundle import load_bundle
+
+        config = load_bundle(args.bundle, verify_graphs=False).uncertainty
+        if config is None:
+            parser.error("the bundle has no uncertainty section: pass --fit, or a bundle with one")
+    out["coverage"] = {}
+    for path, err, focal in per_report:
+        cov = coverage(err, config, focal)
+        out["coverage"][path] = cov
+        print(format_coverage(path, cov))
+    if args.json is not None:
+        args.json.write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
