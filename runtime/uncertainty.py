@@ -21,6 +21,18 @@ position covariance, in the camera frame (m^2), is ``sigma_range^2 u u^T + sigma
 with ``u`` the unit line of sight. Every term scales with the rig (``tau``, ``f``), so a rig the
 constants were not fitted on gets sigmas in proportion.
 
+A frame that has the target's position but no pose (``PoseResult.position_valid`` without ``valid``:
+the flip undecided) gets a covariance of the same shape from its own constants (the ``position_uncertainty``
+section, :class:`PositionUncertaintyConfig`, session 29). Its position comes from a loosely fitting
+outline or from the registered pose moved onto it, so the outline's chamfer (at most the bundle's
+``registration.position_max_chamfer_px``) widens both axes::
+
+    sigma_range   = tau * sqrt(range_k^2 + (range_chamfer_k * chamfer_px)^2)
+    sigma_lateral = sqrt(lateral_floor_m^2 + (lateral_px * z / f)^2 + (lateral_chamfer_m * chamfer_px)^2)
+
+(on session 27's fit frames, the position-only frames' cross-range miss ranked with the chamfer at 0.58 and
+not with the distance). Such a frame gets no covariance when its chamfer is not finite.
+
 The constants are fitted by :mod:`spacepose.tools.calibrate_uncertainty` on training frames, never
 by hand. The errors have heavier tails than a normal distribution: read the measured coverage in the
 model card before trusting a 3-sigma bound.
@@ -36,7 +48,8 @@ import numpy as np
 
 from .errors import BundleError, check_shape
 
-__all__ = ["UncertaintyConfig", "PoseUncertainty", "pose_uncertainty", "parse_uncertainty"]
+__all__ = ["UncertaintyConfig", "PositionUncertaintyConfig", "PoseUncertainty", "pose_uncertainty",
+           "position_uncertainty", "parse_uncertainty", "parse_position_uncertainty"]
 
 
 @dataclass(frozen=True)
@@ -69,6 +82,35 @@ class UncertaintyConfig:
             raise ValueError("uncertainty: lateral_px and lateral_floor_m cannot both be 0 (a singular covariance)")
         if self.rotation_k_deg == 0.0 and self.rotation_floor_deg == 0.0 and self.rotation_chamfer_deg == 0.0:
             raise ValueError("uncertainty: rotation_k_deg, rotation_floor_deg and rotation_chamfer_deg cannot all be 0")
+
+
+@dataclass(frozen=True)
+class PositionUncertaintyConfig:
+    """The ``position_uncertainty`` section of ``bundle.json``: the covariance of a position reported without a
+    pose (module docstring for the model).
+
+    range_k, range_chamfer_k: the range sigma per metre of depth tolerance, and per metre of tolerance and
+        outline pixel of chamfer (added in quadrature).
+    lateral_px, lateral_floor_m, lateral_chamfer_m: the cross-range sigma: pixels at the target's range, a floor
+        (m) and metres per outline pixel of chamfer (added in quadrature).
+    """
+
+    range_k: float
+    range_chamfer_k: float
+    lateral_px: float
+    lateral_floor_m: float
+    lateral_chamfer_m: float
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not math.isfinite(value) or value < 0.0:
+                raise ValueError(f"position_uncertainty.{f.name} must be finite and >= 0, got {value!r}")
+        if self.range_k == 0.0 and self.range_chamfer_k == 0.0:
+            raise ValueError("position_uncertainty: range_k and range_chamfer_k cannot both be 0")
+        if self.lateral_px == 0.0 and self.lateral_floor_m == 0.0 and self.lateral_chamfer_m == 0.0:
+            raise ValueError("position_uncertainty: lateral_px, lateral_floor_m and lateral_chamfer_m cannot all be 0 "
+                             "(a singular covariance)")
 
 
 @dataclass(frozen=True)
@@ -107,26 +149,65 @@ def pose_uncertainty(position: np.ndarray, tau_m: float, focal_px: float, config
     else:
         chamfer_term = config.rotation_chamfer_deg * float(chamfer_px) if config.rotation_chamfer_deg > 0.0 else 0.0
         s_rot = math.sqrt(config.rotation_floor_deg ** 2 + (config.rotation_k_deg * ratio) ** 2 + chamfer_term ** 2)
+    return PoseUncertainty(position_cov=_line_of_sight_cov(u, s_range, s_lat), sigma_range_m=s_range,
+                           sigma_lateral_m=s_lat, sigma_rotation_deg=s_rot)
+
+
+def position_uncertainty(position: np.ndarray, tau_m: float, focal_px: float, config: PositionUncertaintyConfig,
+                         chamfer_px: float) -> PoseUncertainty | None:
+    """The uncertainty of a position reported without a pose: the target centre at ``position`` (3,) in the
+    camera frame, registered with depth tolerance ``tau_m`` (m), focal length ``focal_px``, the outline's best
+    fit within ``chamfer_px`` (outline px). ``sigma_rotation_deg`` is NaN (there is no attitude).
+
+    ``None`` when an input is not finite or (but the chamfer, which may be 0) not positive, or when a sigma
+    would be 0 (a singular covariance: the constants leave out a term and the chamfer is 0).
+    """
+    check_shape(position, (3,), "position")
+    p = np.asarray(position, dtype=np.float64)
+    z = float(np.linalg.norm(p))
+    if not (np.all(np.isfinite(p)) and z > 0.0 and math.isfinite(tau_m) and tau_m > 0.0
+            and math.isfinite(focal_px) and focal_px > 0.0 and math.isfinite(chamfer_px) and chamfer_px >= 0.0):
+        return None
+    chamfer = float(chamfer_px)
+    s_range = float(tau_m) * math.hypot(config.range_k, config.range_chamfer_k * chamfer)
+    s_lat = math.sqrt(config.lateral_floor_m ** 2 + (config.lateral_px * z / float(focal_px)) ** 2
+                      + (config.lateral_chamfer_m * chamfer) ** 2)
+    if s_range <= 0.0 or s_lat <= 0.0:
+        return None
+    return PoseUncertainty(position_cov=_line_of_sight_cov(p / z, s_range, s_lat), sigma_range_m=s_range,
+                           sigma_lateral_m=s_lat, sigma_rotation_deg=float("nan"))
+
+
+def _line_of_sight_cov(u: np.ndarray, sigma_range: float, sigma_lateral: float) -> np.ndarray:
+    """(3, 3) ``sigma_range^2 u u^T + sigma_lateral^2 (I - u u^T)`` for the unit line of sight ``u`` (3,)."""
     along = np.outer(u, u)
-    cov = s_range ** 2 * along + s_lat ** 2 * (np.eye(3) - along)
-    return PoseUncertainty(position_cov=cov, sigma_range_m=s_range, sigma_lateral_m=s_lat, sigma_rotation_deg=s_rot)
+    return sigma_range ** 2 * along + sigma_lateral ** 2 * (np.eye(3) - along)
 
 
 def parse_uncertainty(section: Any) -> UncertaintyConfig | None:
     """The bundle's ``uncertainty`` section (``None`` when absent); BundleError when malformed."""
+    return _parse(section, "uncertainty", UncertaintyConfig, optional=("rotation_chamfer_deg",))
+
+
+def parse_position_uncertainty(section: Any) -> PositionUncertaintyConfig | None:
+    """The bundle's ``position_uncertainty`` section (``None`` when absent); BundleError when malformed."""
+    return _parse(section, "position_uncertainty", PositionUncertaintyConfig)
+
+
+def _parse(section: Any, name: str, cls: type, optional: tuple[str, ...] = ()) -> Any:
     if section is None:
         return None
     if not isinstance(section, Mapping):
-        raise BundleError(f"bundle.json: uncertainty must be an object, got {type(section).__name__}")
-    names = [f.name for f in fields(UncertaintyConfig)]
+        raise BundleError(f"bundle.json: {name} must be an object, got {type(section).__name__}")
+    names = [f.name for f in fields(cls)]
     unknown = sorted(set(section) - set(names))
-    missing = [n for n in names if n not in section and n != "rotation_chamfer_deg"]   # that one is optional
+    missing = [n for n in names if n not in section and n not in optional]
     if unknown or missing:
-        raise BundleError(f"bundle.json: uncertainty has unknown keys {unknown} / lacks {missing}")
+        raise BundleError(f"bundle.json: {name} has unknown keys {unknown} / lacks {missing}")
     for key, value in section.items():
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise BundleError(f"bundle.json: uncertainty.{key} must be a number, got {value!r}")
+            raise BundleError(f"bundle.json: {name}.{key} must be a number, got {value!r}")
     try:
-        return UncertaintyConfig(**{k: float(v) for k, v in section.items()})
+        return cls(**{k: float(v) for k, v in section.items()})
     except ValueError as err:
         raise BundleError(f"bundle.json: {err}") from err

@@ -1,6 +1,6 @@
 """Fit and check the per-frame uncertainty model (:mod:`spacepose.uncertainty`) on ``eval-pose`` reports.
 
-``python -m spacepose.tools.calibrate_uncertainty REPORT [REPORT ...] [--bundle DIR] [--fit] [--json OUT]``
+``python -m spacepose.tools.calibrate_uncertainty REPORT [REPORT ...] [--bundle DIR] [--fit] [--positions] [--json OUT]``
 
 Each REPORT is an ``eval-pose`` ``pose_eval.json`` (or ``.json.gz``) of a dataset's frames; its valid
 poses give, per frame, the range error (``e_pos_los``: the reported centre's miss along the line of
@@ -18,6 +18,12 @@ rectified focal length.
   the covariance matches their spread); the share of right and of wrong poses beyond a 3-sigma
   (chi-square 99.73 %) gate; the rank correlation of the errors with the predicted sigmas.
 
+With ``--positions`` the same for the frames with a position but no pose (``position_valid``, not ``valid``):
+the five constants of :class:`~spacepose.uncertainty.PositionUncertaintyConfig` (:func:`fit_position_uncertainty`:
+the range's shape by non-negative least squares of ``(e_range / tau)^2`` on ``[1, chamfer^2]``, the cross-range's
+of ``lateral^2 / 2`` on ``[1, (z/f)^2, chamfer^2]``, each scaled to a mean normalised squared error of 1, over the
+positions that miss by at most 0.5 m), or the coverage of the bundle's ``position_uncertainty`` section.
+
 Fit only on training frames; check on frames rendered after the fit.
 """
 
@@ -34,11 +40,13 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from spacepose.uncertainty import UncertaintyConfig, pose_uncertainty
+from spacepose.uncertainty import (PositionUncertaintyConfig, UncertaintyConfig, pose_uncertainty,
+                                   position_uncertainty)
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["NOMINAL", "pose_errors", "wrong_poses", "fit_uncertainty", "coverage", "format_coverage", "main"]
+__all__ = ["NOMINAL", "pose_errors", "position_errors", "wrong_poses", "fit_uncertainty", "fit_position_uncertainty",
+           "coverage", "position_coverage", "format_coverage", "format_position_coverage", "main"]
 
 # a normal distribution's share within the sigma-equivalent bounds that ``coverage`` counts
 NOMINAL = {"range_1": 0.6827, "range_2": 0.9545, "lateral_1": 1.0 - math.exp(-0.5), "lateral_2": 1.0 - math.exp(-2.0),
@@ -58,19 +66,30 @@ def pose_errors(rows: Iterable[dict[str, Any]], focal_px: float | None = None) -
     """Per valid pose with a depth tolerance: ``range`` (signed, m), ``lateral`` (m), ``e_R`` (deg),
     ``tau`` (m), ``z`` (m), ``ratio`` (z / f; NaN without ``focal_px``), ``chamfer`` (the outline fit, outline
     px) and, where the row has them, the predicted ``sigma_*`` (NaN otherwise)."""
+    return _errors(rows, focal_px, positions_only=False)
+
+
+def position_errors(rows: Iterable[dict[str, Any]], focal_px: float | None = None) -> dict[str, np.ndarray]:
+    """:func:`pose_errors`' columns for the frames with a position but no pose (``position_valid`` and not
+    ``valid``; ``e_R`` NaN)."""
+    return _errors(rows, focal_px, positions_only=True)
+
+
+def _errors(rows: Iterable[dict[str, Any]], focal_px: float | None, positions_only: bool) -> dict[str, np.ndarray]:
     keys = ("range", "lateral", "e_R", "tau", "ratio", "z", "chamfer", "sigma_range_m", "sigma_lateral_m",
             "sigma_rotation_deg")
     out: dict[str, list[float]] = {k: [] for k in keys}
     for r in rows:
         tau = float(r.get("depth_tolerance_m", float("nan")))
         pos = np.asarray(r.get("position", [float("nan")] * 3), dtype=np.float64)
-        if not (r.get("valid") and math.isfinite(tau) and tau > 0 and np.all(np.isfinite(pos))):
+        wanted = (r.get("position_valid") and not r.get("valid")) if positions_only else r.get("valid")
+        if not (wanted and math.isfinite(tau) and tau > 0 and np.all(np.isfinite(pos))):
             continue
         z = float(np.linalg.norm(pos))
         los, e_pos = float(r["e_pos_los"]), float(r["e_pos"])
         out["range"].append(los)
         out["lateral"].append(math.sqrt(max(e_pos ** 2 - los ** 2, 0.0)))
-        out["e_R"].append(float(r["e_R"]))
+        out["e_R"].append(float("nan") if positions_only else float(r["e_R"]))
         out["tau"].append(tau)
         out["ratio"].append(z / float(focal_px) if focal_px else float("nan"))
         out["z"].append(z)
@@ -83,7 +102,8 @@ def pose_errors(rows: Iterable[dict[str, Any]], focal_px: float | None = None) -
 
 def wrong_poses(err: dict[str, np.ndarray]) -> np.ndarray:
     """(n,) bool: the poses off by more than :data:`WRONG_DEG` or :data:`WRONG_M` (the centre's miss), the
-    project's "wrong pose" (failures the gates try to stop, not the noise a covariance describes)."""
+    project's "wrong pose" (failures the gates try to stop, not the noise a covariance describes). For
+    :func:`position_errors` rows (``e_R`` NaN): the positions that miss by more than :data:`WRONG_M`."""
     return (err["e_R"] > WRONG_DEG) | (np.hypot(err["range"], err["lateral"]) > WRONG_M)
 
 
@@ -120,6 +140,23 @@ def fit_uncertainty(err: dict[str, np.ndarray]) -> UncertaintyConfig:
                              rotation_chamfer_deg=float(np.sqrt(rot[2])))
 
 
+def fit_position_uncertainty(err: dict[str, np.ndarray]) -> PositionUncertaintyConfig:
+    """The constants of :class:`~spacepose.uncertainty.PositionUncertaintyConfig` from :func:`position_errors`
+    rows, over the positions that miss by at most :data:`WRONG_M` and have a chamfer: the range's shape by
+    non-negative least squares of ``(e_range / tau)^2`` on ``[1, chamfer^2]``, the cross-range's of
+    ``lateral^2 / 2`` on ``[1, (z/f)^2, chamfer^2]``, each scaled so that its mean normalised squared error is 1."""
+    keep = ~wrong_poses(err) & np.isfinite(err["chamfer"]) & np.isfinite(err["ratio"])
+    if keep.sum() < 25:
+        raise ValueError(f"{int(keep.sum())} positions (not wrong, with a chamfer) are too few to fit (need 25)")
+    e = {k: v[keep] for k, v in err.items()}
+    ones, chamfer2 = np.ones(len(e["ratio"])), e["chamfer"] ** 2
+    rng = _scaled_nnls(np.stack([ones, chamfer2], axis=1), (e["range"] / e["tau"]) ** 2)
+    lat = _scaled_nnls(np.stack([ones, e["ratio"] ** 2, chamfer2], axis=1), e["lateral"] ** 2 / 2.0)
+    return PositionUncertaintyConfig(range_k=float(np.sqrt(rng[0])), range_chamfer_k=float(np.sqrt(rng[1])),
+                                     lateral_px=float(np.sqrt(lat[1])), lateral_floor_m=float(np.sqrt(lat[0])),
+                                     lateral_chamfer_m=float(np.sqrt(lat[2])))
+
+
 def _spearman(a: np.ndarray, b: np.ndarray) -> float:
     if len(a) < 3:
         return float("nan")
@@ -147,28 +184,58 @@ def coverage(err: dict[str, np.ndarray], config: UncertaintyConfig | None = None
     if not keep.any():
         return {"poses": 0}
     s_r, s_l, s_R = sig[keep].T
-    e_r, e_l, e_R = err["range"][keep], err["lateral"][keep], err["e_R"][keep]
-    wrong = wrong_poses({k: v[keep] for k, v in err.items()})
-    right = ~wrong
-    d2_position = (e_r / s_r) ** 2 + (e_l / s_l) ** 2
-    d2_rotation = (e_R / s_R) ** 2
-    flagged = (d2_position > CHI2_3DOF_997) | (d2_rotation > CHI2_3DOF_997)
-    return {"poses": int(keep.sum()), "wrong": int(wrong.sum()),
+    e_R = err["e_R"][keep]
+    right = ~wrong_poses({k: v[keep] for k, v in err.items()})
+    out = _position_coverage(err["range"][keep], err["lateral"][keep], s_r, s_l, right, (e_R / s_R) ** 2)
+    return {"poses": out.pop("positions"), **out,
+            "nees_rotation": float(np.mean((e_R[right] / s_R[right]) ** 2) / 3.0) if right.any() else float("nan"),
+            "rotation_median": float(np.mean(e_R <= MAXWELL_MEDIAN * s_R)),
+            "rotation_3": float(np.mean(e_R <= 3 * s_R)),
+            "spearman_rotation": _spearman(e_R, s_R),
+            "sigma_rotation_median_deg": float(np.median(s_R))}
+
+
+def position_coverage(err: dict[str, np.ndarray], config: PositionUncertaintyConfig | None = None,
+                      focal_px: float | None = None) -> dict[str, float]:
+    """:func:`coverage`'s position columns for :func:`position_errors` rows: with ``config`` its sigmas
+    (recomputed from ``tau``, ``z`` and the chamfer with ``focal_px``), else the recorded ones. Keys:
+    ``positions``, ``wrong``, the gate shares, ``nees_range``, ``nees_lateral``, ``range_1/2``,
+    ``lateral_1/2``, ``spearman_position`` and the median sigmas."""
+    n = len(err["range"])
+    if config is not None:
+        sig = np.full((n, 2), np.nan)
+        for i in range(n):
+            spread = position_uncertainty(np.array([0.0, 0.0, err["z"][i]]), float(err["tau"][i]), float(focal_px),
+                                          config, float(err["chamfer"][i]))
+            if spread is not None:
+                sig[i] = spread.sigma_range_m, spread.sigma_lateral_m
+    else:
+        sig = np.stack([err["sigma_range_m"], err["sigma_lateral_m"]], axis=1)
+    keep = np.all(np.isfinite(sig), axis=1)
+    if not keep.any():
+        return {"positions": 0}
+    right = ~wrong_poses({k: v[keep] for k, v in err.items()})
+    s_r, s_l = sig[keep].T
+    return _position_coverage(err["range"][keep], err["lateral"][keep], s_r, s_l, right, np.zeros(int(keep.sum())))
+
+
+def _position_coverage(e_r: np.ndarray, e_l: np.ndarray, s_r: np.ndarray, s_l: np.ndarray, right: np.ndarray,
+                       d2_other: np.ndarray) -> dict[str, float]:
+    """Shares, normalised squared errors (over ``right``) and the 3-sigma gate for range and cross-range errors
+    ``e_r`` (signed), ``e_l`` (>= 0) with sigmas ``s_r``, ``s_l``; ``d2_other`` another term the gate also tests."""
+    wrong = ~right
+    flagged = ((e_r / s_r) ** 2 + (e_l / s_l) ** 2 > CHI2_3DOF_997) | (d2_other > CHI2_3DOF_997)
+    return {"positions": int(len(e_r)), "wrong": int(wrong.sum()),
             "wrong_flagged": float(np.mean(flagged[wrong])) if wrong.any() else float("nan"),
             "right_flagged": float(np.mean(flagged[right])) if right.any() else float("nan"),
             "nees_range": float(np.mean((e_r[right] / s_r[right]) ** 2)) if right.any() else float("nan"),
             "nees_lateral": float(np.mean((e_l[right] / s_l[right]) ** 2) / 2.0) if right.any() else float("nan"),
-            "nees_rotation": float(np.mean((e_R[right] / s_R[right]) ** 2) / 3.0) if right.any() else float("nan"),
             "range_1": float(np.mean(np.abs(e_r) <= s_r)),
             "range_2": float(np.mean(np.abs(e_r) <= 2 * s_r)),
             "lateral_1": float(np.mean(e_l <= s_l)),
             "lateral_2": float(np.mean(e_l <= 2 * s_l)),
-            "rotation_median": float(np.mean(e_R <= MAXWELL_MEDIAN * s_R)),
-            "rotation_3": float(np.mean(e_R <= 3 * s_R)),
             "spearman_position": _spearman(np.hypot(e_r, e_l), np.sqrt(s_r ** 2 + 2 * s_l ** 2)),
-            "spearman_rotation": _spearman(e_R, s_R),
-            "sigma_range_median_m": float(np.median(s_r)), "sigma_lateral_median_m": float(np.median(s_l)),
-            "sigma_rotation_median_deg": float(np.median(s_R))}
+            "sigma_range_median_m": float(np.median(s_r)), "sigma_lateral_median_m": float(np.median(s_l))}
 
 
 def format_coverage(name: str, cov: dict[str, float]) -> str:
@@ -182,11 +249,25 @@ def format_coverage(name: str, cov: dict[str, float]) -> str:
             f"{cov['spearman_position']:.2f}, e_R {cov['spearman_rotation']:.2f}")
 
 
+def format_position_coverage(name: str, cov: dict[str, float]) -> str:
+    if not cov.get("positions"):
+        return f"{name}: no position without a pose that has a covariance"
+    cells = " ".join(f"{k} {100 * cov[k]:5.1f}% ({100 * NOMINAL[k]:.1f})"
+                     for k in ("range_1", "range_2", "lateral_1", "lateral_2"))
+    return (f"{name}: {cov['positions']} positions without a pose | {cells} | per-axis normalised squared error of "
+            f"the {cov['positions'] - cov['wrong']} within {WRONG_M} m: range {cov['nees_range']:.2f}, lateral "
+            f"{cov['nees_lateral']:.2f} | beyond a 3-sigma gate: {100 * cov['right_flagged']:.1f}% of those, "
+            f"{100 * cov['wrong_flagged']:.0f}% of the {cov['wrong']} others | spearman e_pos "
+            f"{cov['spearman_position']:.2f}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m spacepose.tools.calibrate_uncertainty", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("reports", type=Path, nargs="+", help="eval-pose pose_eval.json[.gz] files")
     parser.add_argument("--fit", action="store_true", help="fit the constants on these reports")
+    parser.add_argument("--positions", action="store_true",
+                        help="the frames with a position but no pose (the position_uncertainty section)")
     parser.add_argument("--bundle", type=Path, default=None, help="bundle whose uncertainty section is checked")
     parser.add_argument("--focal-px", type=float, default=None,
                         help="rectified focal length (default: each report's focal_px)")
@@ -199,24 +280,32 @@ def main(argv: Sequence[str] | None = None) -> int:
         focal = args.focal_px or report.get("focal_px")
         if focal is None:
             parser.error(f"{path} records no focal_px: pass --focal-px")
-        per_report.append((str(path), pose_errors(report["frames"], float(focal)), float(focal)))
+        errors = position_errors if args.positions else pose_errors
+        per_report.append((str(path), errors(report["frames"], float(focal)), float(focal)))
+    section = "position_uncertainty" if args.positions else "uncertainty"
     out: dict[str, Any] = {"reports": [p for p, _, _ in per_report]}
+    config: UncertaintyConfig | PositionUncertaintyConfig | None
     if args.fit:
         pooled = {k: np.concatenate([e[k] for _, e, _ in per_report]) for k in per_report[0][1]}
-        config = fit_uncertainty(pooled)
+        config = fit_position_uncertainty(pooled) if args.positions else fit_uncertainty(pooled)
         out["fit"] = asdict(config)
-        print(json.dumps({"uncertainty": out["fit"]}, indent=1))
+        print(json.dumps({section: out["fit"]}, indent=1))
     else:
         from spacepose.bundle import load_bundle
 
-        config = load_bundle(args.bundle, verify_graphs=False).uncertainty
+        config = getattr(load_bundle(args.bundle, verify_graphs=False), section)
         if config is None:
-            parser.error("the bundle has no uncertainty section: pass --fit, or a bundle with one")
+            parser.error(f"the bundle has no {section} section: pass --fit, or a bundle with one")
     out["coverage"] = {}
     for path, err, focal in per_report:
-        cov = coverage(err, config, focal)
+        if args.positions:
+            cov = position_coverage(err, config, focal)   # type: ignore[arg-type]
+            line = format_position_coverage(path, cov)
+        else:
+            cov = coverage(err, config, focal)            # type: ignore[arg-type]
+            line = format_coverage(path, cov)
         out["coverage"][path] = cov
-        print(format_coverage(path, cov))
+        print(line)
     if args.json is not None:
         args.json.write_text(json.dumps(out, indent=1))
     return 0

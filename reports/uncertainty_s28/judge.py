@@ -10,11 +10,18 @@ z/f, below), checked on ``fresh640`` / ``fresh1280`` (seeds 2801, 2802); it was 
 RUNS (default ``runs/s28``) holds the ``eval-pose`` reports of the shipped bundle's decisions: ``full_s27f``,
 ``full_s27g`` (spent train sets, seeds 2701 and 2704) and ``../s27/extra640_S`` (seed 2703) to fit on; the
 check sets above (``fresh640d`` in two halves, ``fresh640d_a`` and ``fresh640d_b``); and, reported only,
-``test640``, ``unseen1280`` and ``seq_u1.json`` .. ``seq_u5.json`` (``sequence eval``, seeds 2811-2815). When
-they are all there, their valid poses are cut to the columns used here and written to ``rows.json.gz`` beside
+``test640``, ``unseen1280`` and ``seq_w1.json`` .. ``seq_w5.json`` (``sequence eval``; session 29's sequences, seeds
+2911-2915, see below). When they are all there, their valid poses are cut to the columns used here and written to ``rows.json.gz`` beside
 this script; otherwise that committed file is read, so the verdicts reproduce from the repository alone. The
 uncertainty is recomputed here from each pose's depth tolerance, range and chamfer (the runs' own bundle
 may have had another section or none: the section does not change any decision).
+
+Session 29: session 28's runs were lost with its machine before this script's verdict was read, so every set was
+rendered and evaluated again, by the same commands and seeds (rendering is a pure function of seed and index). The
+five sequences of session 28 (seeds 2811-2815) were not recorded with their parameters; they are replaced by five
+new ones, reported only: ``python -m spacepose.tools.sequence render data/seq_wK --frames 40 --distance D --rate 2
+--regime G --seed 291K``, K = 1..5, D = 14, 20, 26, 32, 38, G = sun, albedo, penumbra, mixed, sun; then ``sequence
+eval data/seq_wK --threads 1 --json runs/s28/seq_wK.json``.
 """
 from __future__ import annotations
 
@@ -51,7 +58,7 @@ def _files(runs: Path) -> dict[str, list[Path]]:
              "fresh1280d": [runs / "fresh1280d" / "pose_eval.json"],
              "test640": [runs / "test640" / "pose_eval.json"], "unseen1280": [runs / "unseen1280" / "pose_eval.json"]}
     for i in range(1, 6):
-        files[f"seq_u{i}"] = [runs / f"seq_u{i}.json"]
+        files[f"seq_w{i}"] = [runs / f"seq_w{i}.json"]
     return files
 
 
