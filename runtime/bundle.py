@@ -53,6 +53,10 @@ A bundle is a folder::
                       "rotation_chamfer_deg": 1.5},   # optional, needs
                                        # registration: a valid pose's position covariance and
                                        # rotation sigma (spacepose.uncertainty.UncertaintyConfig)
+      "position_uncertainty": {"range_k": 0.25, "range_chamfer_k": 0.12, "lateral_px": 0.0,
+                               "lateral_floor_m": 0.0, "lateral_chamfer_m": 0.035},   # optional,
+                                       # needs registration: the covariance of a position reported
+                                       # without a pose (PositionUncertaintyConfig)
       "rig": {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0},
       "distance_range_m": [10.0, 50.0],
       "dataset": {"seed": 0, "size": 10000},
@@ -77,13 +81,13 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from .errors import BundleError
 from .flip_classifier import FlipClassifierConfig, parse_flip_classifier
-from .uncertainty import UncertaintyConfig, parse_uncertainty
+from .uncertainty import PositionUncertaintyConfig, UncertaintyConfig, parse_position_uncertainty, parse_uncertainty
 from .pose_inputs import PoseInputSpec
 from .registration import RegistrationConfig
 from .roi import COARSE_TILE_OVERLAP_PX, WINDOW_DISPARITY_FILL
@@ -222,6 +226,8 @@ class ModelBundle:
             when the bundle has none.
         uncertainty: the optional per-frame uncertainty model (:mod:`spacepose.uncertainty`), ``None``
             when the bundle has none (no covariance is then reported).
+        position_uncertainty: the optional covariance model of a position reported without a pose
+            (:class:`spacepose.uncertainty.PositionUncertaintyConfig`), ``None`` when the bundle has none.
         stereo, pose, voting: graph and voting configs; ``rig``: the training rig.
         distance_range_m: (near, far) target distance the graphs were trained for.
         dataset_seed, dataset_size, training_commit, metrics: provenance and measured numbers.
@@ -252,6 +258,7 @@ class ModelBundle:
     silhouette: SilhouetteConfig | None = None
     flip_classifier: FlipClassifierConfig | None = None
     uncertainty: UncertaintyConfig | None = None
+    position_uncertainty: PositionUncertaintyConfig | None = None
     graph_metadata: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     @property
@@ -653,7 +660,8 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         silhouette_points=_frozen(outline),
         silhouette=_parse_silhouette(data.get("silhouette"), len(outline), data.get("registration") is not None),
         flip_classifier=_parse_flip(data),
-        uncertainty=_parse_uncertainty(data),
+        uncertainty=_parse_uncertainty(data, "uncertainty", parse_uncertainty),
+        position_uncertainty=_parse_uncertainty(data, "position_uncertainty", parse_position_uncertainty),
     )
 
 
@@ -664,10 +672,10 @@ def _parse_flip(data: Mapping[str, Any]) -> FlipClassifierConfig | None:
     return config
 
 
-def _parse_uncertainty(data: Mapping[str, Any]) -> UncertaintyConfig | None:
-    config = parse_uncertainty(data.get("uncertainty"))
+def _parse_uncertainty(data: Mapping[str, Any], key: str, parse: Callable[[Any], Any]) -> Any:
+    config = parse(data.get(key))
     if config is not None and data.get("registration") is None:
-        raise BundleError("bundle.json: uncertainty needs a registration section (its depth tolerance scales the range)")
+        raise BundleError(f"bundle.json: {key} needs a registration section (its depth tolerance scales the range)")
     return config
 
 

@@ -54,7 +54,7 @@ from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
 from .silhouette import align_centroid, decide_outline, polish_pose
-from .uncertainty import pose_uncertainty
+from .uncertainty import pose_uncertainty, position_uncertainty
 
 __all__ = ["PoseResult", "PoseEstimator", "DECISION_ROUTES", "rotation_to_quaternion", "pose_crop_window",
            "refine_icp"]
@@ -134,7 +134,9 @@ class PoseResult:
             In the JSON line since session 25.
         position_cov: (3, 3) covariance of ``position`` (m^2, camera frame) for a valid pose, from the
             bundle's ``uncertainty`` model (:mod:`spacepose.uncertainty`: long along the line of sight,
-            where the stereo depth is coarse); NaN without a valid pose, a depth tolerance or that section.
+            where the stereo depth is coarse), and for a position without a pose from its
+            ``position_uncertainty`` model (session 29; it widens with the outline's chamfer); NaN without a
+            position, a depth tolerance or the section that applies.
             ``sigma_rotation_deg``: the per-axis standard deviation of the attitude's error (degrees), NaN
             likewise and where the model needs the outline's chamfer and there is none. In the JSON line since session 28 (``null`` where NaN). Measured coverage: the model
             card, "Per-frame uncertainty".
@@ -524,6 +526,11 @@ class PoseEstimator:
             if spread is not None:
                 result = dataclasses.replace(result, position_cov=spread.position_cov,
                                              sigma_rotation_deg=spread.sigma_rotation_deg)
+        elif position_valid and not valid and self.bundle.position_uncertainty is not None:
+            spread = position_uncertainty(position, result.depth_tolerance_m, self.focal_px,
+                                          self.bundle.position_uncertainty, result.outline_chamfer_px)
+            if spread is not None:
+                result = dataclasses.replace(result, position_cov=spread.position_cov)
         if status == "bad_input":  # a bad frame says nothing about where the target is: the prior stays as it was
             return result
         with self._lock:

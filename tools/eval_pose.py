@@ -135,10 +135,11 @@ def _grouped(rows: list[dict[str, Any]]) -> dict[str, Any]:
     for r in rows:
         groups.setdefault(f"regime:{r['regime']}", []).append(r)
         groups.setdefault(f"distance:{distance_bin(r['distance'])}", []).append(r)
-    from spacepose.tools.calibrate_uncertainty import coverage, pose_errors
+    from spacepose.tools.calibrate_uncertainty import coverage, pose_errors, position_coverage, position_errors
 
     return {"overall": summarise(rows), **{k: summarise(v) for k, v in sorted(groups.items())},
-            "confidence": confidence_table(rows), "uncertainty": coverage(pose_errors(rows))}
+            "confidence": confidence_table(rows), "uncertainty": coverage(pose_errors(rows)),
+            "position_uncertainty": position_coverage(position_errors(rows))}
 
 
 def draw_box_overlay(image: np.ndarray, K: np.ndarray, corners: np.ndarray, poses: list[tuple[np.ndarray, np.ndarray, tuple]],
@@ -313,7 +314,7 @@ def format_tables(report: dict[str, Any]) -> str:
         label = name if name == "ours" else f"baseline ({report.get('baseline_name')})"
         lines += [f"### {label}", "", "| group | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
         for group, stats in block.items():
-            if group in ("confidence", "uncertainty"):
+            if group in ("confidence", "uncertainty", "position_uncertainty"):
                 continue
             lines.append(f"| {group} | " + " | ".join(_fmt(stats.get(c, float("nan"))) for c in cols) + " |")
         lines.append("")
@@ -328,6 +329,10 @@ def format_tables(report: dict[str, Any]) -> str:
 
             lines += ["predicted uncertainty (share within, normal's in brackets; spearman: errors vs sigmas)", "",
                       format_coverage("valid poses", block["uncertainty"]), ""]
+        if (block.get("position_uncertainty") or {}).get("positions"):
+            from spacepose.tools.calibrate_uncertainty import format_position_coverage
+
+            lines += [format_position_coverage("positions without a pose", block["position_uncertainty"]), ""]
     return "\n".join(lines)
 
 

@@ -21,7 +21,8 @@ rendered and evaluated again, by the same commands and seeds (rendering is a pur
 five sequences of session 28 (seeds 2811-2815) were not recorded with their parameters; they are replaced by five
 new ones, reported only: ``python -m spacepose.tools.sequence render data/seq_wK --frames 40 --distance D --rate 2
 --regime G --seed 291K``, K = 1..5, D = 14, 20, 26, 32, 38, G = sun, albedo, penumbra, mixed, sun; then ``sequence
-eval data/seq_wK --threads 1 --json runs/s28/seq_wK.json``.
+eval data/seq_wK --threads 1 --json runs/s28/seq_wK.json``. ``full_s27g`` was evaluated in two halves
+(``full_s27g_a``: ``--limit 675``, ``full_s27g_b``: ``--skip 675``).
 """
 from __future__ import annotations
 
@@ -51,7 +52,8 @@ NEES = ("nees_range", "nees_lateral", "nees_rotation")
 
 
 def _files(runs: Path) -> dict[str, list[Path]]:
-    files = {"fit_s27f": [runs / "full_s27f" / "pose_eval.json"], "fit_s27g": [runs / "full_s27g" / "pose_eval.json"],
+    files = {"fit_s27f": [runs / "full_s27f" / "pose_eval.json"],
+             "fit_s27g": [runs / "full_s27g_a" / "pose_eval.json", runs / "full_s27g_b" / "pose_eval.json"],
              "fit_s27x": [runs.parent / "s27" / "extra640_S" / "pose_eval.json"],
              "fresh640": [runs / "fresh640" / "pose_eval.json"], "fresh1280": [runs / "fresh1280" / "pose_eval.json"],
              "fresh640d": [runs / "fresh640d_a" / "pose_eval.json", runs / "fresh640d_b" / "pose_eval.json"],

@@ -12,7 +12,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # --import-mode=import
 
 from spacepose.bundle import load_bundle  # noqa: E402
 from spacepose.errors import BundleError  # noqa: E402
-from spacepose.uncertainty import UncertaintyConfig, parse_uncertainty, pose_uncertainty  # noqa: E402
+from spacepose.uncertainty import (PositionUncertaintyConfig, UncertaintyConfig, parse_position_uncertainty,  # noqa: E402
+                                   parse_uncertainty, pose_uncertainty, position_uncertainty)
 
 SECTION = {"range_k": 0.3, "lateral_px": 1.2, "lateral_floor_m": 0.02, "rotation_k_deg": 80.0,
            "rotation_floor_deg": 0.5, "rotation_chamfer_deg": 1.5}
@@ -174,3 +175,104 @@ def test_without_the_section_or_a_valid_pose_there_is_none(tmp_path, monkeypatch
     est = _estimator(tmp_path / "on", monkeypatch, SECTION)
     res = est.estimate(np.zeros_like(left), np.zeros_like(right))   # eclipse: no pose
     assert not res.valid and res.to_dict()["position_cov"] is None and res.to_dict()["sigma_rotation_deg"] is None
+
+
+POSITION_SECTION = {"range_k": 0.25, "range_chamfer_k": 0.12, "lateral_px": 0.3, "lateral_floor_m": 0.01,
+                    "lateral_chamfer_m": 0.035}
+POSITION_CONFIG = PositionUncertaintyConfig(**POSITION_SECTION)
+
+
+def test_a_position_without_a_pose_gets_a_covariance_that_grows_with_the_chamfer():
+    position = np.array([1.0, 2.0, 30.0])
+    tight, loose = (position_uncertainty(position, 0.6, 800.0, POSITION_CONFIG, c) for c in (0.5, 2.8))
+    u = position / np.linalg.norm(position)
+    for spread, chamfer in ((tight, 0.5), (loose, 2.8)):
+        assert np.allclose(spread.position_cov @ u, spread.sigma_range_m ** 2 * u)
+        assert spread.sigma_range_m == pytest.approx(0.6 * math.hypot(0.25, 0.12 * chamfer))
+        ratio = np.linalg.norm(position) / 800.0
+        assert spread.sigma_lateral_m == pytest.approx(math.sqrt(0.01 ** 2 + (0.3 * ratio) ** 2 + (0.035 * chamfer) ** 2))
+        assert math.isnan(spread.sigma_rotation_deg)          # no attitude, no rotation sigma
+        assert np.all(np.linalg.eigvalsh(spread.position_cov) > 0)
+    assert loose.sigma_range_m > tight.sigma_range_m and loose.sigma_lateral_m > tight.sigma_lateral_m
+
+
+@pytest.mark.parametrize("tau, chamfer", [(0.5, float("nan")), (0.5, -1.0), (float("nan"), 1.0), (0.0, 1.0)])
+def test_a_position_without_its_inputs_gets_no_covariance(tau, chamfer):
+    assert position_uncertainty(np.array([0.0, 0.0, 20.0]), tau, 800.0, POSITION_CONFIG, chamfer) is None
+
+
+def test_a_covariance_that_would_be_singular_is_not_given():
+    only_chamfer = PositionUncertaintyConfig(0.25, 0.0, 0.0, 0.0, 0.03)
+    assert position_uncertainty(np.array([0.0, 0.0, 20.0]), 0.5, 800.0, only_chamfer, 0.0) is None
+    assert position_uncertainty(np.array([0.0, 0.0, 20.0]), 0.5, 800.0, only_chamfer, 0.4) is not None
+
+
+@pytest.mark.parametrize("changes, match", [
+    ({"range_k": 0.0, "range_chamfer_k": 0.0}, "cannot both be 0"),
+    ({"lateral_px": 0.0, "lateral_floor_m": 0.0, "lateral_chamfer_m": 0.0}, "singular"),
+    ({"lateral_chamfer_m": -0.1}, "lateral_chamfer_m must be finite and >= 0"),
+    ({"range_k": float("inf")}, "range_k must be finite"),
+])
+def test_bad_position_constants_are_refused(changes, match):
+    with pytest.raises(ValueError, match=match):
+        PositionUncertaintyConfig(**{**POSITION_SECTION, **changes})
+    with pytest.raises(BundleError, match=match):
+        parse_position_uncertainty({**POSITION_SECTION, **changes})
+
+
+@pytest.mark.parametrize("section, match", [
+    ("0.3", "must be an object"),
+    ({**POSITION_SECTION, "rotation_k_deg": 1.0}, "unknown keys"),
+    ({k: v for k, v in POSITION_SECTION.items() if k != "range_chamfer_k"}, "lacks"),   # every key is needed
+    ({**POSITION_SECTION, "lateral_px": [0.3]}, "must be a number"),
+])
+def test_malformed_position_sections_are_refused(section, match):
+    with pytest.raises(BundleError, match=match):
+        parse_position_uncertainty(section)
+    assert parse_position_uncertainty(None) is None
+    assert parse_position_uncertainty(dict(POSITION_SECTION)) == POSITION_CONFIG
+
+
+def test_the_position_section_needs_registration(tmp_path):
+    from _bundle_fixtures import make_bundle
+
+    folder = make_bundle(tmp_path / "plain", manifest_overrides={"position_uncertainty": POSITION_SECTION})
+    with pytest.raises(BundleError, match="position_uncertainty needs a registration"):
+        load_bundle(folder)
+    assert load_bundle(make_bundle(tmp_path / "none")).position_uncertainty is None
+
+
+def test_a_position_only_frame_carries_its_covariance_into_the_json_line(tmp_path):
+    """test_silhouette's plate: the registration never decides, the outline's fit (chamfer 2.2 px) is too loose
+    to decide, so the frame has a position and no pose; with the section it has a covariance, the pose's
+    section does not give it one, and without the section it has none."""
+    from _bundle_fixtures import synthetic_pair
+    from test_silhouette import _estimator as plate_estimator
+    from test_silhouette import _with_outline_chamfer
+
+    from spacepose.calibration.rig import paper_rig
+    from spacepose.estimator import PoseEstimator
+
+    left, right = synthetic_pair()
+
+    def estimate(name, sections):
+        est = plate_estimator(tmp_path / name, {"min_margin": 0.99, "position_max_tau_m": 5.0},
+                              {"max_chamfer_px": 1.5, "min_margin_px": 5.0})
+        data = json.loads((est.bundle.path / "bundle.json").read_text())
+        data.update(sections)
+        (est.bundle.path / "bundle.json").write_text(json.dumps(data))
+        est = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(est.bundle.path), threads=1)
+        return est, _with_outline_chamfer(est, 2.2).estimate(left, right)
+
+    est, res = estimate("on", {"position_uncertainty": POSITION_SECTION, "uncertainty": SECTION})
+    assert est.bundle.position_uncertainty == POSITION_CONFIG
+    assert res.status == "weak_votes" and not res.valid and res.position_valid
+    assert res.outline_chamfer_px == pytest.approx(2.2)
+    expected = position_uncertainty(res.position, res.depth_tolerance_m, est.focal_px, POSITION_CONFIG, 2.2)
+    assert np.allclose(res.position_cov, expected.position_cov) and math.isnan(res.sigma_rotation_deg)
+    line = json.loads(json.dumps(res.to_dict("f")))
+    assert np.allclose(line["position_cov"], expected.position_cov) and line["sigma_rotation_deg"] is None
+    _, pose_only = estimate("pose", {"uncertainty": SECTION})   # the valid poses' section alone: nothing here
+    assert pose_only.position_valid and np.all(np.isnan(pose_only.position_cov))
+    _, off = estimate("off", {})
+    assert off.position_valid and off.to_dict()["position_cov"] is None

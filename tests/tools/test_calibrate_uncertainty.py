@@ -7,8 +7,9 @@ import types
 import numpy as np
 import pytest
 
-from spacepose.tools.calibrate_uncertainty import NOMINAL, coverage, fit_uncertainty, main, pose_errors, wrong_poses
-from spacepose.uncertainty import UncertaintyConfig, pose_uncertainty
+from spacepose.tools.calibrate_uncertainty import (NOMINAL, coverage, fit_position_uncertainty, fit_uncertainty, main,
+                                                   pose_errors, position_coverage, position_errors, wrong_poses)
+from spacepose.uncertainty import PositionUncertaintyConfig, UncertaintyConfig, pose_uncertainty, position_uncertainty
 
 TRUE = UncertaintyConfig(range_k=0.2, lateral_px=1.0, lateral_floor_m=0.02, rotation_k_deg=40.0, rotation_floor_deg=0.8,
                          rotation_chamfer_deg=1.5)
@@ -124,3 +125,96 @@ def test_eval_pose_records_the_sigmas_along_and_across_the_line_of_sight():
     none = predicted_sigmas(types.SimpleNamespace(position=position, position_cov=np.full((3, 3), np.nan),
                                                   sigma_rotation_deg=float("nan")))
     assert all(math.isnan(v) for v in none.values())
+
+
+TRUE_P = PositionUncertaintyConfig(range_k=0.25, range_chamfer_k=0.12, lateral_px=0.4, lateral_floor_m=0.01,
+                                   lateral_chamfer_m=0.035)
+
+
+def _position_rows(config, n=4000, seed=0, focal=FOCAL):
+    """eval-pose rows of frames with a position and no pose, errors drawn from ``config``'s normal model, and
+    valid poses (which position_errors leaves out)."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for _ in range(n):
+        z = rng.uniform(10.0, 50.0)
+        tau = max(0.15, z ** 2 * 0.25 / (focal * 1.0))
+        chamfer = rng.uniform(0.3, 3.0)
+        spread = position_uncertainty(np.array([0.0, 0.0, z]), tau, focal, config, chamfer)
+        e_range = rng.normal(0.0, spread.sigma_range_m)
+        e_lat = np.linalg.norm(rng.normal(0.0, spread.sigma_lateral_m, 2))
+        rows.append({"valid": False, "position_valid": True, "depth_tolerance_m": tau,
+                     "position": [0.0, 0.0, z + e_range], "e_pos_los": e_range, "e_pos": math.hypot(e_range, e_lat),
+                     "e_R": float("nan"), "outline_chamfer_px": chamfer})
+    return rows + _rows(TRUE, n=50, seed=seed)
+
+
+def test_the_position_fit_recovers_the_constants_of_a_normal_model():
+    err = position_errors(_position_rows(TRUE_P), FOCAL)
+    assert len(err["range"]) == 4000 and np.all(np.isnan(err["e_R"]))    # the valid poses are left out
+    fit = fit_position_uncertainty(err)
+    assert fit.range_k == pytest.approx(TRUE_P.range_k, rel=0.15)
+    assert fit.range_chamfer_k == pytest.approx(TRUE_P.range_chamfer_k, rel=0.2)
+    assert fit.lateral_chamfer_m == pytest.approx(TRUE_P.lateral_chamfer_m, rel=0.15)
+    assert fit.lateral_px == pytest.approx(TRUE_P.lateral_px, rel=0.3)
+    cov = position_coverage(position_errors(_position_rows(TRUE_P, seed=1), FOCAL), fit, FOCAL)
+    assert cov["positions"] == 4000
+    for key in ("range_1", "range_2", "lateral_1", "lateral_2"):
+        assert cov[key] == pytest.approx(NOMINAL[key], abs=0.04), key
+    assert cov["nees_range"] == pytest.approx(1.0, abs=0.1) and cov["nees_lateral"] == pytest.approx(1.0, abs=0.1)
+    assert cov["spearman_position"] > 0.2
+
+
+def test_far_off_positions_do_not_widen_the_position_fit_and_stand_out():
+    rows = _position_rows(TRUE_P)
+    clean = fit_position_uncertainty(position_errors(rows, FOCAL))
+    for r in rows[:60]:
+        r["e_pos_los"], r["e_pos"] = 4.0, 5.0
+    err = position_errors(rows, FOCAL)
+    assert wrong_poses(err)[:60].all()
+    fit = fit_position_uncertainty(err)
+    assert fit.range_k == pytest.approx(clean.range_k, rel=0.05)
+    assert fit.lateral_chamfer_m == pytest.approx(clean.lateral_chamfer_m, rel=0.05)
+    cov = position_coverage(err, clean, FOCAL)
+    # the 60 far off are all beyond the gate (so are a few of the model's own tails past 0.5 m)
+    assert cov["wrong"] >= 60 and round(cov["wrong_flagged"] * cov["wrong"]) >= 60 and cov["right_flagged"] < 0.02
+    tight = PositionUncertaintyConfig(0.1, 0.0, 0.0, 0.005, 0.01)
+    assert position_coverage(err, tight, FOCAL)["range_1"] < 0.5
+    assert position_coverage(position_errors(rows[:10], FOCAL)) == {"positions": 0}    # nothing recorded
+    with pytest.raises(ValueError, match="too few"):
+        fit_position_uncertainty(position_errors(rows[60:80], FOCAL))
+
+
+def test_the_command_fits_the_positions(tmp_path, capsys):
+    report = tmp_path / "pose_eval.json"
+    report.write_text(json.dumps({"focal_px": FOCAL, "frames": _position_rows(TRUE_P, n=500)}))
+    out = tmp_path / "fit.json"
+    assert main([str(report), "--fit", "--positions", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert set(data["fit"]) == {"range_k", "range_chamfer_k", "lateral_px", "lateral_floor_m", "lateral_chamfer_m"}
+    assert data["coverage"][str(report)]["positions"] == 500
+    assert '"position_uncertainty"' in capsys.readouterr().out
+
+
+def test_the_eval_report_carries_both_coverages_from_the_recorded_sigmas():
+    """eval-pose's grouped report and its markdown: the valid poses' coverage and the positions' (recorded sigmas)."""
+    from spacepose.tools.eval_pose import _grouped, format_tables
+
+    rows = []
+    for r in _rows(TRUE, n=40) + _position_rows(TRUE_P, n=40)[:40]:
+        r = dict(r, regime="sun", distance=20.0, e_t=0.1, add=0.1, speed=0.01, e_R_sym=1.0, status="x", confidence=0.5)
+        r.setdefault("e_R", float("nan"))
+        pos, tau, chamfer = np.asarray(r["position"]), r["depth_tolerance_m"], r.get("outline_chamfer_px", float("nan"))
+        spread = (pose_uncertainty(pos, tau, FOCAL, TRUE, chamfer) if r["valid"]
+                  else position_uncertainty(pos, tau, FOCAL, TRUE_P, chamfer) if r.get("position_valid") else None)
+        r.update(sigma_range_m=float("nan"), sigma_lateral_m=float("nan"), sigma_rotation_deg=float("nan"))
+        if spread is not None:
+            r.update(sigma_range_m=spread.sigma_range_m, sigma_lateral_m=spread.sigma_lateral_m,
+                     sigma_rotation_deg=spread.sigma_rotation_deg)
+        rows.append(r)
+    block = _grouped(rows)
+    assert block["uncertainty"]["poses"] == 40 and block["position_uncertainty"]["positions"] == 40
+    assert block["position_uncertainty"] == pytest.approx(
+        position_coverage(position_errors(rows, FOCAL), TRUE_P, FOCAL), nan_ok=True)
+    text = format_tables({"ours": block})
+    assert "valid poses: 40 poses" in text and "positions without a pose: 40 positions without a pose" in text
