@@ -66,6 +66,13 @@ def test_writes_samples_on_the_mesh_with_unit_normals(bundle_copy):
     assert main(["export-surface", str(bundle_copy), "--count", "500", "--no-registration", "--no-silhouette"]) == 2
     assert (bundle_copy / "bundle.json").read_text() == text
     _drop_flip_classifier(bundle_copy)
+    # ... nor the shipped uncertainty sections without the registration (its depth tolerance scales the range)
+    text = (bundle_copy / "bundle.json").read_text()
+    assert main(["export-surface", str(bundle_copy), "--count", "500", "--no-registration", "--no-silhouette"]) == 2
+    assert (bundle_copy / "bundle.json").read_text() == text
+    data = json.loads(text)
+    assert data.pop("uncertainty") and data.pop("position_uncertainty")
+    (bundle_copy / "bundle.json").write_text(json.dumps(data, indent=1))
     assert main(["export-surface", str(bundle_copy), "--count", "500", "--no-registration", "--no-silhouette"]) == 0
     assert load_bundle(bundle_copy).registration is None
 
