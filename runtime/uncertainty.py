@@ -31,7 +31,8 @@ outline or from the registered pose moved onto it, so the outline's chamfer (at 
     sigma_lateral = sqrt(lateral_floor_m^2 + (lateral_px * z / f)^2 + (lateral_chamfer_m * chamfer_px)^2)
 
 (on session 27's fit frames, the position-only frames' cross-range miss ranked with the chamfer at 0.58 and
-not with the distance). Such a frame gets no covariance when its chamfer is not finite.
+not with the distance). Such a frame gets no covariance when its chamfer is not finite, or when a sigma would be
+0 (the shipped constants have no cross-range term but the chamfer's).
 
 The constants are fitted by :mod:`spacepose.tools.calibrate_uncertainty` on training frames, never
 by hand. The errors have heavier tails than a normal distribution: read the measured coverage in the
