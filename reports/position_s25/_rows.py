@@ -3,8 +3,9 @@ else committed; and the table row they print for a group of them.
 
 ``compact_rows(files, rows_path, keys)``: ``files`` maps a set's name to the run JSON files (each
 ``{"frames": [...]}``) whose frames make it up. When every file exists, each frame is cut to ``keys`` (and kept
-when ``keep`` says so), and the rows are written to ``rows_path`` (gzip with no timestamp, so that the same rows
-give the same bytes) and returned; otherwise the rows committed at ``rows_path`` are read.
+when ``keep`` says so; a key the frame lacks takes its value from ``defaults``, and without one there is an
+error), and the rows are written to ``rows_path`` (gzip with no timestamp, so that the same rows give the same
+bytes) and returned; otherwise the rows committed at ``rows_path`` are read.
 
 ``position_stats(rows)``: frames, valid poses, position-valid frames and their share, e_pos mean / median / p95 /
 max over them and the share within ``depth_tolerance_m`` (columns of ``STATS_HEAD``).
@@ -15,7 +16,7 @@ from __future__ import annotations
 import gzip
 import json
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -24,9 +25,12 @@ STATS_HEAD = (f"{'frames':>5} {'valid':>5} {'pos':>5} {'share':>6} {'mean':>6} {
 
 
 def compact_rows(files: dict[str, list[Path]], rows_path: Path, keys: Sequence[str],
-                 keep: Callable[[dict], bool] = lambda row: True) -> dict[str, list[dict]]:
+                 keep: Callable[[dict], bool] = lambda row: True,
+                 defaults: Mapping[str, Any] | None = None) -> dict[str, list[dict]]:
+    defaults = defaults or {}
     if all(f.is_file() for fs in files.values() for f in fs):
-        rows = {name: [{k: r[k] for k in keys} for f in fs for r in json.loads(f.read_text())["frames"] if keep(r)]
+        rows = {name: [{k: r[k] if k in r or k not in defaults else defaults[k] for k in keys}
+                       for f in fs for r in json.loads(f.read_text())["frames"] if keep(r)]
                 for name, fs in files.items()}
         with open(rows_path, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
             fh.write(json.dumps(rows).encode())

@@ -26,18 +26,20 @@ eval data/seq_wK --threads 1 --json runs/s28/seq_wK.json``. ``full_s27g`` was ev
 """
 from __future__ import annotations
 
-import gzip
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "position_s25"))
+from _rows import compact_rows  # noqa: E402
+
 from spacepose.tools.calibrate_uncertainty import (NOMINAL, coverage, fit_uncertainty, pose_errors,  # noqa: E402
                                                    wrong_poses)
 from spacepose.uncertainty import UncertaintyConfig
 
-HERE = Path(__file__).resolve().parent
 KEYS = ("frame", "distance", "valid", "tracked", "depth_tolerance_m", "position", "e_pos", "e_pos_los", "e_R", "e_t",
         "outline_chamfer_px")
 FIT_SETS = ("fit_s27f", "fit_s27g", "fit_s27x")
@@ -64,19 +66,14 @@ def _files(runs: Path) -> dict[str, list[Path]]:
     return files
 
 
+# a key a run's rows lack (eval-pose rows have no "tracked", sequence rows no "distance") is None, "tracked" False
+MISSING = {**{k: None for k in KEYS}, "tracked": False}
+
+
 def _rows(files: dict[str, list[Path]]) -> dict[str, list[dict]]:
     """The valid poses of every set, cut to KEYS, from the runs when they are all there (and then written to
-    rows.json.gz, gzip without a timestamp), else from the committed rows.json.gz."""
-    path = HERE / "rows.json.gz"
-    if all(f.is_file() for fs in files.values() for f in fs):
-        rows = {name: [{k: r.get(k, False if k == "tracked" else None) for k in KEYS}
-                       for f in fs for r in json.loads(f.read_text())["frames"] if r["valid"]]
-                for name, fs in files.items()}
-        with open(path, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
-            fh.write(json.dumps(rows).encode())
-        return rows
-    with gzip.open(path, "rt") as fh:
-        return json.load(fh)
+    rows.json.gz), else from the committed rows.json.gz."""
+    return compact_rows(files, HERE / "rows.json.gz", KEYS, keep=lambda r: r["valid"], defaults=MISSING)
 
 
 def fit_v2(err: dict[str, np.ndarray], n_bins: int = 5) -> UncertaintyConfig:

@@ -13,17 +13,19 @@ read, so the verdict reproduces from the repository alone.
 """
 from __future__ import annotations
 
-import gzip
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "position_s25"))
+from _rows import compact_rows  # noqa: E402
+
 from spacepose.tools.calibrate_uncertainty import (NOMINAL, fit_position_uncertainty, position_coverage,
                                                    position_errors)
 
-HERE = Path(__file__).resolve().parent
 KEYS = ("frame", "distance", "valid", "position_valid", "tracked", "depth_tolerance_m", "position", "e_pos",
         "e_pos_los", "e_R", "outline_chamfer_px")
 FIT_SETS = ("fit_s27f", "fit_s27g", "fit_s27x")
@@ -31,6 +33,7 @@ FOCAL_1280 = ("check_1280", "s28_fresh1280d", "s28_fresh1280", "unseen1280")   #
 RULE_A_SHARES, RULE_A_NEES = (("range_2", 0.88), ("lateral_2", 0.80)), (0.6, 1.6)
 RULE_B_SHARES, RULE_B_NEES = (("range_2", 0.70), ("lateral_2", 0.70)), (0.4, 2.5)
 NEES = ("nees_range", "nees_lateral")
+MISSING = {**{k: None for k in KEYS}, "tracked": False}   # a key a run's rows lack: as in session 28's judge
 
 
 def _files(runs: Path) -> dict[str, list[Path]]:
@@ -48,17 +51,8 @@ def _files(runs: Path) -> dict[str, list[Path]]:
 
 
 def _rows(files: dict[str, list[Path]]) -> dict[str, list[dict]]:
-    path = HERE / "rows.json.gz"
-    if all(f.is_file() for fs in files.values() for f in fs):
-        rows = {name: [{k: r.get(k, False if k == "tracked" else None) for k in KEYS}
-                       for f in fs for r in json.loads(f.read_text())["frames"]
-                       if r.get("position_valid") and not r["valid"]]
-                for name, fs in files.items()}
-        with open(path, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
-            fh.write(json.dumps(rows).encode())
-        return rows
-    with gzip.open(path, "rt") as fh:
-        return json.load(fh)
+    return compact_rows(files, HERE / "rows.json.gz", KEYS, keep=lambda r: r.get("position_valid") and not r["valid"],
+                        defaults=MISSING)
 
 
 def main(argv: list[str]) -> int:
