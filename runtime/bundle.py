@@ -57,6 +57,10 @@ A bundle is a folder::
                                "lateral_floor_m": 0.0, "lateral_chamfer_m": 0.035},   # optional,
                                        # needs registration: the covariance of a position reported
                                        # without a pose (PositionUncertaintyConfig)
+      "confidence": {"position_m": 0.1, "rotation_deg": 2.0, "bias": 1.6,
+                     "slope": 1.3},   # optional, needs uncertainty: a valid pose's confidence is the
+                                       # (recalibrated) probability of being within the tolerance
+                                       # (spacepose.confidence.ConfidenceConfig)
       "rig": {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0},
       "distance_range_m": [10.0, 50.0],
       "dataset": {"seed": 0, "size": 10000},
@@ -85,6 +89,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from .confidence import ConfidenceConfig, parse_confidence
 from .errors import BundleError
 from .flip_classifier import FlipClassifierConfig, parse_flip_classifier
 from .uncertainty import PositionUncertaintyConfig, UncertaintyConfig, parse_position_uncertainty, parse_uncertainty
@@ -228,6 +233,9 @@ class ModelBundle:
             when the bundle has none (no covariance is then reported).
         position_uncertainty: the optional covariance model of a position reported without a pose
             (:class:`spacepose.uncertainty.PositionUncertaintyConfig`), ``None`` when the bundle has none.
+        confidence: the optional model of a valid pose's confidence from its uncertainty
+            (:mod:`spacepose.confidence`); ``None`` when the bundle has none (the decision routes' own
+            confidence is then reported).
         stereo, pose, voting: graph and voting configs; ``rig``: the training rig.
         distance_range_m: (near, far) target distance the graphs were trained for.
         dataset_seed, dataset_size, training_commit, metrics: provenance and measured numbers.
@@ -259,6 +267,7 @@ class ModelBundle:
     flip_classifier: FlipClassifierConfig | None = None
     uncertainty: UncertaintyConfig | None = None
     position_uncertainty: PositionUncertaintyConfig | None = None
+    confidence: ConfidenceConfig | None = None
     graph_metadata: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     @property
@@ -662,6 +671,7 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         flip_classifier=_parse_flip(data),
         uncertainty=_parse_uncertainty(data, "uncertainty", parse_uncertainty),
         position_uncertainty=_parse_uncertainty(data, "position_uncertainty", parse_position_uncertainty),
+        confidence=_parse_confidence(data),
     )
 
 
@@ -676,6 +686,14 @@ def _parse_uncertainty(data: Mapping[str, Any], key: str, parse: Callable[[Any],
     config = parse(data.get(key))
     if config is not None and data.get("registration") is None:
         raise BundleError(f"bundle.json: {key} needs a registration section (its depth tolerance scales the range)")
+    return config
+
+
+def _parse_confidence(data: Mapping[str, Any]) -> ConfidenceConfig | None:
+    config = parse_confidence(data.get("confidence"))
+    if config is not None and data.get("uncertainty") is None:
+        raise BundleError("bundle.json: confidence needs an uncertainty section (it is computed from the pose's "
+                          "covariance)")
     return config
 
 

@@ -44,6 +44,7 @@ import numpy as np
 
 from . import roi
 from .bundle import ModelBundle, load_bundle
+from .confidence import calibrated_confidence, within_probability
 from .errors import ShapeError
 from .flip import flipped_pose, resolve_flip
 from .flip_classifier import FlipClassifier
@@ -54,7 +55,7 @@ from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
 from .silhouette import align_centroid, decide_outline, polish_pose
-from .uncertainty import pose_uncertainty, position_uncertainty
+from .uncertainty import PoseUncertainty, pose_uncertainty, position_uncertainty
 
 __all__ = ["PoseResult", "PoseEstimator", "DECISION_ROUTES", "rotation_to_quaternion", "pose_crop_window",
            "refine_icp"]
@@ -98,7 +99,14 @@ class PoseResult:
         valid: whether the pose can be used.
         status: ``"ok"`` or why not (``no_target``, ``too_few_points``, ``weak_votes``,
             ``fit_residual``, ``out_of_range``, ``bad_input``).
-        confidence: in [0, 1] (see :mod:`spacepose.pose_stage`); 0 when not valid.
+        confidence: in [0, 1]; 0 when not valid. With the bundle's ``confidence`` section (the default
+            bundle's since session 30): the probability that the pose is within that section's tolerance
+            (0.10 m and 2 degrees), from its ``position_cov`` and ``sigma_rotation_deg``
+            (:mod:`spacepose.confidence`; 0 for a valid pose without them); it falls as the errors grow. Without
+            the section: ``decision_confidence``.
+        decision_confidence: how sure the route that decided the pose was (:mod:`spacepose.pose_stage`;
+            with registration, the inlier share times a margin term, :meth:`PoseEstimator._register`); 0 when
+            not valid. It does not rank the pose's errors. Not part of the JSON line.
         timings_ms: wall time per named stage.
         network_ms: of that, the time inside the stereo and pose graphs (the rest is the pipeline's
             own work: validation, rectification, windows, back-projection, voting, checks).
@@ -194,6 +202,7 @@ class PoseResult:
     position_valid: bool = False
     position_cov: np.ndarray = field(default_factory=lambda: np.full((3, 3), np.nan))
     sigma_rotation_deg: float = float("nan")
+    decision_confidence: float = 0.0
 
     def to_dict(self, frame: str | None = None) -> dict[str, Any]:
         """JSON-serialisable record (CONVENTIONS.md ``estimate`` line; NaN becomes ``null``)."""
@@ -505,7 +514,7 @@ class PoseEstimator:
         position_valid = bool(np.all(np.isfinite(position)))
 
         result = PoseResult(R=R, t=t, q_wxyz=rotation_to_quaternion(R), valid=valid, status=status,
-                            confidence=float(conf), timings_ms=dict(timer.timings_ms),
+                            confidence=float(conf), decision_confidence=float(conf), timings_ms=dict(timer.timings_ms),
                             network_ms=timer.network_ms,
                             n_points=0 if stage is None else int(stage.n_inliers),
                             roi=None if window is None else window.bbox, detail=detail,
@@ -526,6 +535,8 @@ class PoseEstimator:
             if spread is not None:
                 result = dataclasses.replace(result, position_cov=spread.position_cov,
                                              sigma_rotation_deg=spread.sigma_rotation_deg)
+            if self.bundle.confidence is not None:
+                result = dataclasses.replace(result, confidence=self._pose_confidence(spread))
         elif position_valid and not valid and self.bundle.position_uncertainty is not None:
             spread = position_uncertainty(position, result.depth_tolerance_m, self.focal_px,
                                           self.bundle.position_uncertainty, result.outline_chamfer_px)
@@ -573,6 +584,15 @@ class PoseEstimator:
             outcome = self._pose_from_pair(left_r, right_r, None, timer)
         status, stage, window, detail = outcome
         return self._result(status, timer, stage=stage, window=window, detail=detail)
+
+    def _pose_confidence(self, spread: PoseUncertainty | None) -> float:
+        """The bundle's ``confidence`` model for a valid pose's uncertainty ``spread`` (0 without one, or
+        without a finite rotation sigma: no accuracy is claimed)."""
+        config = self.bundle.confidence
+        if config is None or spread is None or not math.isfinite(spread.sigma_rotation_deg):
+            return 0.0
+        p = within_probability(spread.sigma_range_m, spread.sigma_lateral_m, spread.sigma_rotation_deg, config)
+        return calibrated_confidence(p, config)
 
     def _register(self, xyz: np.ndarray, stage: PoseStageResult, stereo: Any, timer: StageTimer,
                   left_r: np.ndarray | None = None) -> tuple[PoseStageResult, str]:

@@ -81,10 +81,13 @@ def gate_table(rows: Iterable[dict[str, Any]], confidences: Sequence[float], mar
     """One row per (min_confidence, min_flip_margin, max_tau_m): kept poses, flips, wrong poses among them.
 
     ``max_tau_m`` gates on the rows' ``depth_tolerance_m`` (the registration's; a row without one
-    passes every value)."""
+    passes every value). The confidence is the rows' ``decision_confidence`` (``confidence`` in reports
+    without it)."""
     ok = [r for r in rows if r.get("valid")]
     tau = np.nan_to_num(np.array([_finite(r.get("depth_tolerance_m")) for r in ok]), nan=0.0)
-    conf = np.array([_finite(r.get("confidence")) for r in ok])
+    # the gate judges the decision's own confidence (reports since session 30 also carry the pose's accuracy
+    # confidence, spacepose.confidence, under "confidence"; earlier ones only the decision's)
+    conf = np.array([_finite(r.get("decision_confidence", r.get("confidence"))) for r in ok])
     margin = np.nan_to_num(np.array([_finite(r.get("flip_margin")) for r in ok]), nan=np.inf)  # no flip stage
     e_t, e_r, flip, wrong = _outcomes(ok, max_e_t, max_e_r)
     table = []

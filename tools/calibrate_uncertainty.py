@@ -1,6 +1,7 @@
 """Fit and check the per-frame uncertainty model (:mod:`spacepose.uncertainty`) on ``eval-pose`` reports.
 
-``python -m spacepose.tools.calibrate_uncertainty REPORT [REPORT ...] [--bundle DIR] [--fit] [--positions] [--json OUT]``
+``python -m spacepose.tools.calibrate_uncertainty REPORT [REPORT ...] [--bundle DIR] [--fit] [--positions | --confidence]
+[--json OUT]``
 
 Each REPORT is an ``eval-pose`` ``pose_eval.json`` (or ``.json.gz``) of a dataset's frames; its valid
 poses give, per frame, the range error (``e_pos_los``: the reported centre's miss along the line of
@@ -24,6 +25,12 @@ the range's shape by non-negative least squares of ``(e_range / tau)^2`` on ``[1
 of ``lateral^2 / 2`` on ``[1, (z/f)^2, chamfer^2]``, each scaled to a mean normalised squared error of 1, over the
 positions that miss by at most 0.5 m), or the coverage of the bundle's ``position_uncertainty`` section.
 
+With ``--confidence`` the confidence of valid poses (:mod:`spacepose.confidence`): with ``--fit``, its ``bias`` and
+``slope`` (:func:`fit_confidence`, the logistic regression of "``e_t`` and ``e_R`` within ``--tolerance``" on the
+logit of the normal model's probability, from the sigmas of the bundle's ``uncertainty`` section); without, how
+the bundle's ``confidence`` section predicts that event (:func:`confidence_check`: mean confidence against the
+share within, rank correlations with the errors, Brier score, quantile bins).
+
 Fit only on training frames; check on frames rendered after the fit.
 """
 
@@ -40,13 +47,15 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from spacepose.confidence import P_CLIP, ConfidenceConfig, calibrated_confidence, within_probability
 from spacepose.uncertainty import (PositionUncertaintyConfig, UncertaintyConfig, pose_uncertainty,
                                    position_uncertainty)
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["NOMINAL", "pose_errors", "position_errors", "wrong_poses", "fit_uncertainty", "fit_position_uncertainty",
-           "coverage", "position_coverage", "format_coverage", "format_position_coverage", "main"]
+           "coverage", "position_coverage", "format_coverage", "format_position_coverage", "normal_within",
+           "within_tolerance", "fit_confidence", "confidence_check", "format_confidence_check", "main"]
 
 # a normal distribution's share within the sigma-equivalent bounds that ``coverage`` counts
 NOMINAL = {"range_1": 0.6827, "range_2": 0.9545, "lateral_1": 1.0 - math.exp(-0.5), "lateral_2": 1.0 - math.exp(-2.0),
@@ -63,8 +72,8 @@ def _read(path: Path) -> dict[str, Any]:
 
 
 def pose_errors(rows: Iterable[dict[str, Any]], focal_px: float | None = None) -> dict[str, np.ndarray]:
-    """Per valid pose with a depth tolerance: ``range`` (signed, m), ``lateral`` (m), ``e_R`` (deg),
-    ``tau`` (m), ``z`` (m), ``ratio`` (z / f; NaN without ``focal_px``), ``chamfer`` (the outline fit, outline
+    """Per valid pose with a depth tolerance: ``range`` (signed, m), ``lateral`` (m), ``e_R`` (deg), ``e_t``
+    (the translation's error, m; NaN where the row has none), ``tau`` (m), ``z`` (m), ``ratio`` (z / f; NaN without ``focal_px``), ``chamfer`` (the outline fit, outline
     px) and, where the row has them, the predicted ``sigma_*`` (NaN otherwise)."""
     return _errors(rows, focal_px, positions_only=False)
 
@@ -76,7 +85,7 @@ def position_errors(rows: Iterable[dict[str, Any]], focal_px: float | None = Non
 
 
 def _errors(rows: Iterable[dict[str, Any]], focal_px: float | None, positions_only: bool) -> dict[str, np.ndarray]:
-    keys = ("range", "lateral", "e_R", "tau", "ratio", "z", "chamfer", "sigma_range_m", "sigma_lateral_m",
+    keys = ("range", "lateral", "e_R", "e_t", "tau", "ratio", "z", "chamfer", "sigma_range_m", "sigma_lateral_m",
             "sigma_rotation_deg")
     out: dict[str, list[float]] = {k: [] for k in keys}
     for r in rows:
@@ -90,6 +99,7 @@ def _errors(rows: Iterable[dict[str, Any]], focal_px: float | None, positions_on
         out["range"].append(los)
         out["lateral"].append(math.sqrt(max(e_pos ** 2 - los ** 2, 0.0)))
         out["e_R"].append(float("nan") if positions_only else float(r["e_R"]))
+        out["e_t"].append(float("nan") if positions_only else float(r.get("e_t", float("nan"))))
         out["tau"].append(tau)
         out["ratio"].append(z / float(focal_px) if focal_px else float("nan"))
         out["z"].append(z)
@@ -155,6 +165,87 @@ def fit_position_uncertainty(err: dict[str, np.ndarray]) -> PositionUncertaintyC
     return PositionUncertaintyConfig(range_k=float(np.sqrt(rng[0])), range_chamfer_k=float(np.sqrt(rng[1])),
                                      lateral_px=float(np.sqrt(lat[1])), lateral_floor_m=float(np.sqrt(lat[0])),
                                      lateral_chamfer_m=float(np.sqrt(lat[2])))
+
+
+def normal_within(err: dict[str, np.ndarray], config: UncertaintyConfig, focal_px: float,
+                  tolerance: ConfidenceConfig) -> np.ndarray:
+    """(n,) the normal model's probability ``p`` (:func:`spacepose.confidence.within_probability`) that each
+    :func:`pose_errors` pose is within ``tolerance``'s ``position_m`` and ``rotation_deg``, from the sigmas of
+    ``config`` (recomputed from ``tau``, ``z`` and the chamfer with ``focal_px``); NaN where it has none."""
+    out = np.full(len(err["range"]), np.nan)
+    for i in range(len(out)):
+        spread = pose_uncertainty(np.array([0.0, 0.0, err["z"][i]]), float(err["tau"][i]), float(focal_px), config,
+                                  float(err["chamfer"][i]))
+        if spread is not None and math.isfinite(spread.sigma_rotation_deg):
+            out[i] = within_probability(spread.sigma_range_m, spread.sigma_lateral_m, spread.sigma_rotation_deg,
+                                        tolerance)
+    return out
+
+
+def within_tolerance(err: dict[str, np.ndarray], tolerance: ConfidenceConfig) -> np.ndarray:
+    """(n,) bool: ``e_t <= position_m`` and ``e_R <= rotation_deg`` (the event the confidence predicts)."""
+    return (err["e_t"] <= tolerance.position_m) & (err["e_R"] <= tolerance.rotation_deg)
+
+
+def fit_confidence(p: np.ndarray, within: np.ndarray, position_m: float = 0.10,
+                   rotation_deg: float = 2.0) -> ConfidenceConfig:
+    """``bias`` and ``slope`` of :class:`~spacepose.confidence.ConfidenceConfig` by maximum likelihood: the
+    logistic regression of ``within`` (n,) bool on ``logit(p)`` (n,), ``p`` clipped as the runtime clips it
+    (Newton's method; poses with ``p`` NaN left out)."""
+    keep = np.isfinite(p)
+    y = np.asarray(within, dtype=np.float64)[keep]
+    if len(y) < 25 or y.min() == y.max():
+        raise ValueError(f"{len(y)} poses, {int(y.sum())} within the tolerance: too few, or all on one side, to fit")
+    q = np.clip(p[keep], P_CLIP, 1.0 - P_CLIP)
+    x = np.stack([np.ones(len(q)), np.log(q / (1.0 - q))], axis=1)
+    w = np.zeros(2)
+    for _ in range(100):
+        m = 0.5 * (1.0 + np.tanh(0.5 * (x @ w)))     # the logistic function, without overflow
+        hessian = (x * (m * (1.0 - m))[:, None]).T @ x
+        try:
+            step = np.linalg.solve(hessian, x.T @ (y - m))
+        except np.linalg.LinAlgError:
+            step = np.full(2, np.inf)
+        if not np.all(np.isfinite(step)) or np.max(np.abs(w + step)) > 1e3:
+            break
+        w += step
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    else:
+        step = np.full(2, np.inf)
+    if not np.max(np.abs(step)) < 1e-10:
+        raise ValueError("the logistic fit did not converge (the poses within and without may be separable)")
+    return ConfidenceConfig(position_m=float(position_m), rotation_deg=float(rotation_deg), bias=float(w[0]),
+                            slope=float(w[1]))
+
+
+def confidence_check(confidence: np.ndarray, within: np.ndarray, e_t: np.ndarray, e_R: np.ndarray,
+                     n_bins: int = 4) -> dict[str, Any]:
+    """How a confidence (n,) predicts ``within`` (n,) bool, over the poses with a finite confidence: ``poses``,
+    ``mean_confidence``, ``share_within``, ``spearman_t`` / ``spearman_R`` (of ``e_t`` / ``e_R`` with the
+    confidence: negative when the errors grow as it falls), ``brier`` and ``brier_base`` (the Brier score of
+    the confidence, and of the set's own share within as a constant), and ``bins``: ``n_bins`` quantile bins
+    of confidence, lowest first, each ``{"poses", "mean_confidence", "share_within"}``."""
+    keep = np.isfinite(confidence)
+    c, y = np.asarray(confidence)[keep], np.asarray(within, dtype=np.float64)[keep]
+    if not len(c):
+        return {"poses": 0}
+    order = np.argsort(c, kind="stable")
+    bins = [{"poses": int(len(b)), "mean_confidence": float(c[b].mean()), "share_within": float(y[b].mean())}
+            for b in np.array_split(order, min(n_bins, len(c)))]
+    return {"poses": int(len(c)), "mean_confidence": float(c.mean()), "share_within": float(y.mean()),
+            "spearman_t": _spearman(np.asarray(e_t)[keep], c), "spearman_R": _spearman(np.asarray(e_R)[keep], c),
+            "brier": float(np.mean((c - y) ** 2)), "brier_base": float(np.mean((y.mean() - y) ** 2)), "bins": bins}
+
+
+def format_confidence_check(name: str, check: dict[str, Any]) -> str:
+    if not check.get("poses"):
+        return f"{name}: no valid pose with a confidence"
+    bins = " ".join(f"{b['mean_confidence']:.2f}/{b['share_within']:.2f}" for b in check["bins"])
+    return (f"{name}: {check['poses']} poses | mean confidence {check['mean_confidence']:.3f}, within "
+            f"{check['share_within']:.3f} | spearman e_t {check['spearman_t']:+.2f}, e_R {check['spearman_R']:+.2f} | "
+            f"brier {check['brier']:.3f} (constant {check['brier_base']:.3f}) | bins low to high, confidence/within: "
+            f"{bins}")
 
 
 def _spearman(a: np.ndarray, b: np.ndarray) -> float:
@@ -266,8 +357,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("reports", type=Path, nargs="+", help="eval-pose pose_eval.json[.gz] files")
     parser.add_argument("--fit", action="store_true", help="fit the constants on these reports")
-    parser.add_argument("--positions", action="store_true",
-                        help="the frames with a position but no pose (the position_uncertainty section)")
+    what = parser.add_mutually_exclusive_group()
+    what.add_argument("--positions", action="store_true",
+                      help="the frames with a position but no pose (the position_uncertainty section)")
+    what.add_argument("--confidence", action="store_true",
+                      help="the confidence of valid poses from their uncertainty (the confidence section; the "
+                           "bundle's uncertainty section gives the sigmas)")
+    parser.add_argument("--tolerance", type=float, nargs=2, default=(0.10, 2.0), metavar=("M", "DEG"),
+                        help="with --confidence --fit: the tolerance the confidence predicts (default 0.10 m, 2 deg)")
     parser.add_argument("--bundle", type=Path, default=None, help="bundle whose uncertainty section is checked")
     parser.add_argument("--focal-px", type=float, default=None,
                         help="rectified focal length (default: each report's focal_px)")
@@ -282,8 +379,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.error(f"{path} records no focal_px: pass --focal-px")
         errors = position_errors if args.positions else pose_errors
         per_report.append((str(path), errors(report["frames"], float(focal)), float(focal)))
-    section = "position_uncertainty" if args.positions else "uncertainty"
     out: dict[str, Any] = {"reports": [p for p, _, _ in per_report]}
+    if args.confidence:
+        return _confidence_main(parser, args, per_report, out)
+    section = "position_uncertainty" if args.positions else "uncertainty"
     config: UncertaintyConfig | PositionUncertaintyConfig | None
     if args.fit:
         pooled = {k: np.concatenate([e[k] for _, e, _ in per_report]) for k in per_report[0][1]}
@@ -291,9 +390,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         out["fit"] = asdict(config)
         print(json.dumps({section: out["fit"]}, indent=1))
     else:
-        from spacepose.bundle import load_bundle
-
-        config = getattr(load_bundle(args.bundle, verify_graphs=False), section)
+        config = getattr(_load(args.bundle), section)
         if config is None:
             parser.error(f"the bundle has no {section} section: pass --fit, or a bundle with one")
     out["coverage"] = {}
@@ -306,8 +403,46 @@ def main(argv: Sequence[str] | None = None) -> int:
             line = format_coverage(path, cov)
         out["coverage"][path] = cov
         print(line)
-    if args.json is not None:
-        args.json.write_text(json.dumps(out, indent=1))
+    _write(args.json, out)
+    return 0
+
+
+def _load(bundle: Path | None) -> Any:
+    from spacepose.bundle import load_bundle
+
+    return load_bundle(bundle, verify_graphs=False)
+
+
+def _write(path: Path | None, out: dict[str, Any]) -> None:
+    if path is not None:
+        path.write_text(json.dumps(out, indent=1))
+
+
+def _confidence_main(parser: argparse.ArgumentParser, args: argparse.Namespace,
+                     per_report: list[tuple[str, dict[str, np.ndarray], float]], out: dict[str, Any]) -> int:
+    """``--confidence``: fit ``bias`` and ``slope`` on the reports (``--fit``), or check the bundle's section."""
+    model = _load(args.bundle)
+    if model.uncertainty is None:
+        parser.error("the bundle has no uncertainty section: the confidence needs its sigmas")
+    if args.fit:
+        tolerance = ConfidenceConfig(position_m=args.tolerance[0], rotation_deg=args.tolerance[1], bias=0.0, slope=1.0)
+    elif model.confidence is None:
+        parser.error("the bundle has no confidence section: pass --fit, or a bundle with one")
+    else:
+        tolerance = model.confidence
+    p = [normal_within(err, model.uncertainty, focal, tolerance) for _, err, focal in per_report]
+    within = [within_tolerance(err, tolerance) for _, err, _ in per_report]
+    config = tolerance
+    if args.fit:
+        config = fit_confidence(np.concatenate(p), np.concatenate(within), tolerance.position_m, tolerance.rotation_deg)
+        out["fit"] = asdict(config)
+        print(json.dumps({"confidence": out["fit"]}, indent=1))
+    out["check"] = {}
+    for (path, err, _), p_i, w_i in zip(per_report, p, within):
+        conf = np.array([calibrated_confidence(v, config) if math.isfinite(v) else np.nan for v in p_i])
+        out["check"][path] = confidence_check(conf, w_i, err["e_t"], err["e_R"])
+        print(format_confidence_check(path, out["check"][path]))
+    _write(args.json, out)
     return 0
 
 

@@ -12,7 +12,8 @@ Target position without attitude (``PoseResult.position_valid``): the share of f
 position, ``e_pos`` = distance (m) of the reported centre to the labelled one (mean, median, 95th
 percentile), the share of those within the frame's ``depth_tolerance_m``, and ``e_pos_los``: the signed part of the
 error along the line of sight to the labelled centre (positive: too far; its mean is the range bias).
-Also: an error-vs-confidence table (quantile bins of confidence), Fig. 14-style scatter plots
+Also: an error-vs-confidence table (quantile bins of confidence, with the mean confidence and the share of poses
+within the pose bar, 0.10 m and 2 degrees, that the default bundle's confidence predicts), Fig. 14-style scatter plots
 (e_t and e_R against distance) and Fig. 15-style overlays (projected 3-D box; white = GT, green =
 estimate). ``baseline="classical"`` adds :func:`spacepose.tools.classical_pose.estimate_classical`
 (SGBM + FPFH/RANSAC + ICP; needs Open3D, the ``[baseline]`` extra) on the rectified pair.
@@ -34,10 +35,11 @@ from spacepose.imageio import read_image, write_image
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FLIP_DEG", "DISTANCE_BIN_M", "evaluate_pose", "predicted_sigmas", "summarise", "confidence_table", "distance_bin",
+__all__ = ["FLIP_DEG", "BAR_T_M", "BAR_R_DEG", "DISTANCE_BIN_M", "evaluate_pose", "predicted_sigmas", "summarise", "confidence_table", "distance_bin",
            "format_tables", "save_scatter", "draw_box_overlay", "write_report", "model_points"]
 
 FLIP_DEG = 90.0
+BAR_T_M, BAR_R_DEG = 0.10, 2.0   # the pose bar of issue 6 (mean errors); per pose, the event the confidence predicts
 DISTANCE_BIN_M = 10.0
 
 
@@ -113,7 +115,9 @@ def summarise(rows: Iterable[dict[str, Any]]) -> dict[str, Any]:
 
 
 def confidence_table(rows: Iterable[dict[str, Any]], n_bins: int = 4) -> list[dict[str, Any]]:
-    """Valid frames split into ``n_bins`` confidence quantile bins (highest first): errors per bin."""
+    """Valid frames split into ``n_bins`` confidence quantile bins (highest first): errors per bin, the mean
+    confidence and the share within the pose bar (``e_t`` <= :data:`BAR_T_M`, ``e_R`` <= :data:`BAR_R_DEG`: what
+    the default bundle's confidence predicts, :mod:`spacepose.confidence`)."""
     ok = sorted((r for r in rows if r["valid"]), key=lambda r: -r["confidence"])
     if not ok:
         return []
@@ -126,7 +130,9 @@ def confidence_table(rows: Iterable[dict[str, Any]], n_bins: int = 4) -> list[di
                     "e_R_median": float(np.median([r["e_R"] for r in sel])),
                     "e_t_mean": float(np.mean([r["e_t"] for r in sel])),
                     "e_R_mean": float(np.mean([r["e_R"] for r in sel])),
-                    "flips": sum(1 for r in sel if r["e_R"] > FLIP_DEG)})
+                    "flips": sum(1 for r in sel if r["e_R"] > FLIP_DEG),
+                    "confidence_mean": float(np.mean(conf)),
+                    "within_bar": float(np.mean([r["e_t"] <= BAR_T_M and r["e_R"] <= BAR_R_DEG for r in sel]))})
     return out
 
 
@@ -262,7 +268,8 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
         e_pos = float(np.linalg.norm(miss))
         e_pos_los = float(miss @ centre_true / np.linalg.norm(centre_true))   # signed, along the line of sight
         row = {"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "valid": bool(result.valid),
-               "status": result.status, "confidence": float(result.confidence), "wall_ms": wall, **err,
+               "status": result.status, "confidence": float(result.confidence),
+               "decision_confidence": float(result.decision_confidence), "wall_ms": wall, **err,
                "flip_margin": float(result.flip_margin), "depth_tolerance_m": float(result.depth_tolerance_m),
                "outline_chamfer_px": float(result.outline_chamfer_px),
                "outline_margin_px": float(result.outline_margin_px),
@@ -319,7 +326,8 @@ def format_tables(report: dict[str, Any]) -> str:
             lines.append(f"| {group} | " + " | ".join(_fmt(stats.get(c, float("nan"))) for c in cols) + " |")
         lines.append("")
         if block.get("confidence"):
-            ccols = ["confidence_min", "confidence_max", "frames", "e_t_median", "e_R_median", "flips"]
+            ccols = ["confidence_min", "confidence_max", "confidence_mean", "within_bar", "frames", "e_t_median",
+                     "e_R_median", "flips"]
             lines += ["error vs confidence (quantile bins, highest first)", "", "| " + " | ".join(ccols) + " |",
                       "|---" * len(ccols) + "|"]
             lines += ["| " + " | ".join(_fmt(b[c]) for c in ccols) + " |" for b in block["confidence"]]

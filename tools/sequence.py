@@ -124,7 +124,8 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
     for rec in records:
         res = est.estimate(read_image(root / "left" / f"{rec.frame}.png"), read_image(root / "right" / f"{rec.frame}.png"))
         row = {"frame": rec.frame, "valid": bool(res.valid), "status": res.status, "tracked": bool(res.tracked),
-               "confidence": float(res.confidence), "flip_margin": float(res.flip_margin),
+               "confidence": float(res.confidence), "decision_confidence": float(res.decision_confidence),
+               "flip_margin": float(res.flip_margin),
                "e_t": translation_error(rec.t, res.t) if res.valid else float("nan"),
                "e_R": rotation_error_deg(rec.R, res.R) if res.valid else float("nan"),
                "outline_chamfer_px": float(res.outline_chamfer_px), "outline_margin_px": float(res.outline_margin_px),

@@ -24,6 +24,12 @@ def test_table_counts_and_proposal():
     assert propose([r for r in table if r["flips"]]) is None
 
 
+def test_the_gate_reads_the_decision_confidence_where_a_report_has_it():
+    # since session 30 "confidence" is the pose's accuracy confidence; the gate is on the decision's own
+    rows = [dict(r, decision_confidence=r["confidence"], confidence=1.0 - r["confidence"]) for r in ROWS]
+    assert gate_table(rows, [0.0, 0.6], [0.0, 0.01], 0.5, 20.0) == gate_table(ROWS, [0.0, 0.6], [0.0, 0.01], 0.5, 20.0)
+
+
 def test_depth_tolerance_gate():
     rows = [dict(r, depth_tolerance_m=tau) for r, tau in zip(ROWS, [0.2, 0.3, 0.25, 2.0, None])]
     rows[0]["flip_margin"] = 0.01  # now only the depth tolerance separates the wrong far pose at 0.06

@@ -7,8 +7,11 @@ import types
 import numpy as np
 import pytest
 
-from spacepose.tools.calibrate_uncertainty import (NOMINAL, coverage, fit_position_uncertainty, fit_uncertainty, main,
-                                                   pose_errors, position_coverage, position_errors, wrong_poses)
+from spacepose.confidence import ConfidenceConfig, calibrated_confidence
+from spacepose.tools.calibrate_uncertainty import (NOMINAL, confidence_check, coverage, fit_confidence,
+                                                   fit_position_uncertainty, fit_uncertainty, main, normal_within,
+                                                   pose_errors, position_coverage, position_errors, within_tolerance,
+                                                   wrong_poses)
 from spacepose.uncertainty import PositionUncertaintyConfig, UncertaintyConfig, pose_uncertainty, position_uncertainty
 
 TRUE = UncertaintyConfig(range_k=0.2, lateral_px=1.0, lateral_floor_m=0.02, rotation_k_deg=40.0, rotation_floor_deg=0.8,
@@ -218,3 +221,107 @@ def test_the_eval_report_carries_both_coverages_from_the_recorded_sigmas():
         position_coverage(position_errors(rows, FOCAL), TRUE_P, FOCAL), nan_ok=True)
     text = format_tables({"ours": block})
     assert "valid poses: 40 poses" in text and "positions without a pose: 40 positions without a pose" in text
+
+
+# ------------------------------------------------------------------------------------------- confidence (session 30)
+TOLERANCE = ConfidenceConfig(position_m=0.10, rotation_deg=2.0, bias=0.0, slope=1.0)
+
+
+def _confidence_rows(config, n=6000, seed=0, focal=FOCAL, tails=None):
+    """:func:`_rows` with ``e_t`` (the centre's miss: the translation error of a target whose centre is its
+    origin); ``tails``: Student-t degrees of freedom for heavier-tailed errors of the same variance (None: normal)."""
+    rng = np.random.default_rng(seed)
+
+    def draw(sigma, size):
+        if tails is None:
+            return rng.normal(0.0, sigma, size)
+        return rng.standard_t(tails, size) * sigma * math.sqrt((tails - 2.0) / tails)
+
+    rows = []
+    for _ in range(n):
+        z = rng.uniform(10.0, 50.0)
+        tau = max(0.15, z ** 2 * 0.25 / (focal * 1.0))
+        chamfer = rng.uniform(0.4, 2.5)
+        spread = pose_uncertainty(np.array([0.0, 0.0, z]), tau, focal, config, chamfer)
+        e_range = float(draw(spread.sigma_range_m, 1)[0])
+        e_lat = float(np.linalg.norm(draw(spread.sigma_lateral_m, 2)))
+        e_R = float(np.linalg.norm(draw(spread.sigma_rotation_deg, 3)))
+        e_pos = math.hypot(e_range, e_lat)
+        rows.append({"valid": True, "depth_tolerance_m": tau, "position": [0.0, 0.0, z + e_range],
+                     "e_pos_los": e_range, "e_pos": e_pos, "e_t": e_pos, "e_R": e_R, "outline_chamfer_px": chamfer})
+    return rows
+
+
+SMALL = UncertaintyConfig(range_k=0.1, lateral_px=0.5, lateral_floor_m=0.01, rotation_k_deg=20.0,
+                          rotation_floor_deg=0.3, rotation_chamfer_deg=0.8)   # errors around the 0.10 m / 2 deg bar
+
+
+def test_on_normal_errors_the_confidence_fit_is_the_identity_and_calibrated():
+    err = pose_errors(_confidence_rows(SMALL), FOCAL)
+    p = normal_within(err, SMALL, FOCAL, TOLERANCE)
+    within = within_tolerance(err, TOLERANCE)
+    assert np.all(np.isfinite(p)) and 0.2 < within.mean() < 0.8
+    fit = fit_confidence(p, within)
+    assert fit.bias == pytest.approx(0.0, abs=0.15) and fit.slope == pytest.approx(1.0, abs=0.1)
+    check = confidence_check(p, within, err["e_t"], err["e_R"])
+    assert check["mean_confidence"] == pytest.approx(check["share_within"], abs=0.02)
+    for b in check["bins"]:
+        assert b["mean_confidence"] == pytest.approx(b["share_within"], abs=0.05)
+    assert check["spearman_t"] < -0.2 and check["spearman_R"] < -0.2
+    assert check["brier"] < check["brier_base"]
+
+
+def test_heavy_tails_are_recalibrated_by_the_fit():
+    err = pose_errors(_confidence_rows(SMALL, tails=3.0, seed=1), FOCAL)
+    p = normal_within(err, SMALL, FOCAL, TOLERANCE)
+    within = within_tolerance(err, TOLERANCE)
+    assert p.mean() < within.mean() - 0.05           # same variance, more mass near 0: the normal p is too low
+    fit = fit_confidence(p, within)
+    check_err = pose_errors(_confidence_rows(SMALL, tails=3.0, seed=2), FOCAL)
+    p2, within2 = normal_within(check_err, SMALL, FOCAL, TOLERANCE), within_tolerance(check_err, TOLERANCE)
+    conf = np.array([calibrated_confidence(v, fit) for v in p2])
+    raw, fitted = (confidence_check(c, within2, check_err["e_t"], check_err["e_R"]) for c in (p2, conf))
+    assert abs(fitted["mean_confidence"] - fitted["share_within"]) < 0.02
+    assert abs(raw["mean_confidence"] - raw["share_within"]) > 0.05
+    assert fitted["brier"] < raw["brier"]
+
+
+def test_the_confidence_fit_refuses_too_few_or_one_sided_poses():
+    with pytest.raises(ValueError, match="too few"):
+        fit_confidence(np.full(10, 0.5), np.ones(10, bool))
+    with pytest.raises(ValueError, match="one side"):
+        fit_confidence(np.full(100, 0.5), np.ones(100, bool))
+    p = np.linspace(0.01, 0.99, 100)
+    with pytest.raises(ValueError, match="converge"):
+        fit_confidence(p, p > 0.5)                    # separable: the slope runs away
+
+
+def test_the_confidence_check_counts_bins_and_rank_correlations():
+    conf = np.array([0.9, 0.8, 0.2, 0.1, np.nan])
+    within = np.array([True, True, False, False, True])
+    e_t, e_R = np.array([0.01, 0.02, 0.3, 0.5, 9.0]), np.array([0.5, 0.7, 4.0, 9.0, 1.0])
+    check = confidence_check(conf, within, e_t, e_R, n_bins=2)
+    assert check["poses"] == 4                          # the NaN confidence is left out
+    assert check["spearman_t"] == pytest.approx(-1.0) and check["spearman_R"] == pytest.approx(-1.0)
+    assert [b["share_within"] for b in check["bins"]] == [0.0, 1.0]
+    assert check["bins"][0]["mean_confidence"] == pytest.approx(0.15)
+    assert check["brier"] == pytest.approx(np.mean([0.01, 0.04, 0.04, 0.01]))
+    assert check["brier_base"] == pytest.approx(0.25)
+    assert confidence_check(np.array([np.nan]), np.array([True]), e_t[:1], e_R[:1]) == {"poses": 0}
+
+
+def test_the_command_fits_and_checks_the_confidence(tmp_path, capsys):
+    from spacepose.bundle import load_bundle
+
+    shipped = load_bundle(None, verify_graphs=False).uncertainty
+    report = tmp_path / "pose_eval.json"
+    report.write_text(json.dumps({"focal_px": FOCAL, "frames": _confidence_rows(shipped, n=800)}))
+    out = tmp_path / "fit.json"
+    assert main([str(report), "--confidence", "--fit", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert set(data["fit"]) == {"position_m", "rotation_deg", "bias", "slope"}
+    assert data["fit"]["position_m"] == 0.10 and data["fit"]["rotation_deg"] == 2.0
+    assert data["check"][str(report)]["poses"] == 800
+    assert '"confidence"' in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main([str(report), "--confidence", "--positions"])   # one of the two

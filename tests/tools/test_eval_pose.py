@@ -61,6 +61,9 @@ class TestAggregation:
         assert [b["frames"] for b in table] == [2, 2, 2, 2]
         assert table[0]["confidence_min"] > table[-1]["confidence_max"]
         assert table[0]["e_t_median"] < table[-1]["e_t_median"]
+        # the mean confidence and the share within the pose bar (0.10 m and 2 degrees), per bin
+        assert table[0]["confidence_mean"] == pytest.approx(np.mean(np.linspace(0.1, 0.9, 8)[-2:]))
+        assert [b["within_bar"] for b in table] == [0.5, 0.0, 0.0, 0.0]   # e_t 0.10 and 0.21 in the top bin
 
     def test_distance_bins(self):
         assert distance_bin(10.0) == "10-20m" and distance_bin(49.9) == "40-50m" and distance_bin(23.5) == "20-30m"
