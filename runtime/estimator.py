@@ -360,6 +360,9 @@ class PoseEstimator:
             pose: the prior stays the last valid pose. Off by default: on 13 fresh sequences it gave 178
             valid poses (18 off by > 20° or 0.5 m, one > 90° off) against 238 (26, none) without it (session
             25, ``reports/position_s25/judge3.py``).
+        prior_window: with ``use_prior``, the frame right after a valid pose takes its stereo window from
+            that pose (the target's bounding sphere about it; skips the coarse pass). False: every frame's
+            window comes from the coarse pass; the previous pose still decides a pose from its flip.
 
     Raises:
         CalibrationError: unreadable calibration. BundleError: unusable bundle, or one that does not
@@ -368,7 +371,7 @@ class PoseEstimator:
 
     def __init__(self, calib: str | os.PathLike | Any, bundle: str | os.PathLike | ModelBundle | None = None,
                  threads: int = 2, use_prior: bool = True, refine: bool = False, seed: int = 0,
-                 prior_max_gap: int = PRIOR_MAX_GAP, position_window: bool = False) -> None:
+                 prior_max_gap: int = PRIOR_MAX_GAP, position_window: bool = False, prior_window: bool = True) -> None:
         from .calibration.rectify import rectify
         from .calibration.rig import StereoRig, load_rig
         from .onnx_session import make_session
@@ -427,6 +430,7 @@ class PoseEstimator:
         self._prior: PoseResult | None = None   # the last valid pose (the prior) ...
         self._prior_gap = 0                      # ... and how many frames since it
         self.position_window = bool(position_window)
+        self.prior_window = bool(prior_window)
         self._last_position: tuple[np.ndarray, float] | None = None   # the last frame's position-only result
 
     # ------------------------------------------------------------------ prior
@@ -439,7 +443,8 @@ class PoseEstimator:
     def _roi_hint(self):
         from .stereo_stage import RoiHint
 
-        prior = self._valid_prior(max_gap=0)  # a window only from the frame right before (see __init__)
+        # a window only from the frame right before (see __init__)
+        prior = self._valid_prior(max_gap=0) if self.prior_window else None
         r = self.bundle.radius
         if prior is not None:
             centre = prior[0] @ self.bundle.centre + prior[1]

@@ -103,9 +103,11 @@ def _position_errors(rec: Any, res: Any, centre: np.ndarray) -> dict[str, float]
 
 
 def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, threads: int = 2,
-                      prior_max_gap: int | None = None, position_window: bool = False) -> dict[str, Any]:
+                      prior_max_gap: int | None = None, position_window: bool = False,
+                      prior_window: bool = True) -> dict[str, Any]:
     """Run the estimator over the sequence in order with ``use_prior`` (and ``prior_max_gap``, default
-    the estimator's; ``position_window``, :class:`spacepose.estimator.PoseEstimator`); rows and a summary."""
+    the estimator's; ``position_window``, ``prior_window``, :class:`spacepose.estimator.PoseEstimator`); rows
+    and a summary."""
     from spacepose.calibration.rig import load_rig
     from spacepose.estimator import PoseEstimator
     from spacepose.imageio import read_image
@@ -118,6 +120,8 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
     extra = {} if prior_max_gap is None else {"prior_max_gap": int(prior_max_gap)}
     if position_window:
         extra["position_window"] = True
+    if not prior_window:
+        extra["prior_window"] = False
     est = PoseEstimator(load_rig(root / "rig.yaml"), bundle=bundle, threads=threads, use_prior=True, **extra)
     centre = np.asarray(est.bundle.centre, dtype=np.float64)
     rows = []
@@ -131,6 +135,7 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
                "outline_chamfer_px": float(res.outline_chamfer_px), "outline_margin_px": float(res.outline_margin_px),
                "outline_image_score": float(res.outline_image_score), "decided_by": res.decided_by,
                "position_valid": bool(res.position_valid), "stereo_ms": float(res.timings_ms.get("stereo", float("nan"))),
+               "roi": None if res.roi is None else [int(v) for v in res.roi],
                "depth_tolerance_m": float(res.depth_tolerance_m), "position": np.asarray(res.position).tolist(),
                **_position_errors(rec, res, centre), **predicted_sigmas(res), "detail": res.detail}
         rows.append(row)
@@ -168,6 +173,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="frames a valid pose stays the prior without another (default: the estimator's)")
     e.add_argument("--position-window", action="store_true",
                    help="take the next frame's window from a position-only frame too (PoseEstimator position_window)")
+    e.add_argument("--no-prior-window", action="store_true",
+                   help="every frame's stereo window from the coarse pass (PoseEstimator prior_window=False)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     if args.cmd == "render":
@@ -179,7 +186,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         render_sequence(args.out, args.frames, args.distance, args.rate, args.regime, args.seed, (w, h), rig)
         print(f"wrote {args.frames} frames to {args.out}")
         return 0
-    report = evaluate_sequence(args.folder, args.bundle, args.threads, args.prior_max_gap, args.position_window)
+    report = evaluate_sequence(args.folder, args.bundle, args.threads, args.prior_max_gap, args.position_window,
+                               prior_window=not args.no_prior_window)
     print("frame   status        tracked  e_t m   e_R deg")
     for row in report["frames"]:
         print(f"{row['frame']}  {row['status']:<12}  {str(row['tracked']):<7}  "

@@ -1,0 +1,36 @@
+"""The sequences of session 30's look at the uncertainty and confidence of poses in sequences (tracking).
+
+    python reports/sequence_s30/sequences.py fit|check   # prints one render and one eval command per sequence
+
+``fit``: 24 sequences, seeds 3011-3034 (spent for exploration and fitting). ``check``: 16 sequences, seeds
+3051-3066, rendered only after reports/sequence_s30/rule.txt is committed (if one is written). Each: 40 frames at
+640x480 on the paper rig; the distance, regime and rate cycle over the grids below, so that every set mixes them.
+The eval uses the shipped bundle with the prior, as a flight computer runs it (``sequence eval``).
+"""
+from __future__ import annotations
+
+import sys
+
+DISTANCES = (12, 16, 20, 24, 28, 32, 36, 40)
+REGIMES = ("sun", "albedo", "penumbra", "mixed")
+RATES = (1, 2, 3)
+SETS = {"fit": (3011, 24, "seq_f"), "check": (3051, 16, "seq_c")}
+
+
+def sequences(which: str) -> list[tuple[str, int, int, str, int]]:
+    """(name, seed, distance, regime, rate) of every sequence of ``which``."""
+    first, count, prefix = SETS[which]
+    return [(f"{prefix}{i:02d}", first + i, DISTANCES[i % 8], REGIMES[(i + i // 8) % 4], RATES[i % 3])
+            for i in range(count)]
+
+
+def main(argv: list[str]) -> int:
+    for name, seed, distance, regime, rate in sequences(argv[0] if argv else "fit"):
+        print(f"python -m spacepose.tools.sequence render data/{name} --frames 40 --distance {distance} --rate {rate} "
+              f"--regime {regime} --seed {seed}")
+        print(f"python -m spacepose.tools.sequence eval data/{name} --threads 1 --json runs/s30/{name}.json")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
