@@ -38,7 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bundle", type=Path, default=None, help="model bundle folder (default: the shipped one)")
     parser.add_argument("--threads", type=int, default=2, help="onnxruntime threads per graph (default 2)")
     parser.add_argument("--no-prior", action="store_true",
-                        help="no prior between frames: the coarse stereo pass on every frame, no tracking")
+                        help="no prior between frames: no tracking")
+    parser.add_argument("--prior-window", action="store_true",
+                        help="the frame after a valid pose takes its stereo window from that pose, skipping the coarse "
+                             "pass (off by default since session 30: poses on it were worse, see the model card)")
     parser.add_argument("--prior-max-gap", type=non_negative_int, default=None, metavar="N",
                         help="frames a valid pose stays the prior while none is valid (default 0: the next frame only; "
                              "more keeps more chains but also more wrong poses, see the model card)")
@@ -170,6 +173,8 @@ def run(args: argparse.Namespace) -> int:
     names = list_frames(folder)
     check_outputs([args.out, args.csv], args.overlay, args.force)
     extra = {} if args.prior_max_gap is None else {"prior_max_gap": args.prior_max_gap}
+    if args.prior_window:
+        extra["prior_window"] = True
     estimator = PoseEstimator(args.calib, bundle=args.bundle, threads=args.threads, use_prior=not args.no_prior,
                               **extra)
     args.out.parent.mkdir(parents=True, exist_ok=True)

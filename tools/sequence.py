@@ -104,10 +104,10 @@ def _position_errors(rec: Any, res: Any, centre: np.ndarray) -> dict[str, float]
 
 def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, threads: int = 2,
                       prior_max_gap: int | None = None, position_window: bool = False,
-                      prior_window: bool = True) -> dict[str, Any]:
+                      prior_window: bool | None = None) -> dict[str, Any]:
     """Run the estimator over the sequence in order with ``use_prior`` (and ``prior_max_gap``, default
     the estimator's; ``position_window``, ``prior_window``, :class:`spacepose.estimator.PoseEstimator`); rows
-    and a summary."""
+    and a summary. ``prior_window`` None: the estimator's default."""
     from spacepose.calibration.rig import load_rig
     from spacepose.estimator import PoseEstimator
     from spacepose.imageio import read_image
@@ -120,8 +120,8 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
     extra = {} if prior_max_gap is None else {"prior_max_gap": int(prior_max_gap)}
     if position_window:
         extra["position_window"] = True
-    if not prior_window:
-        extra["prior_window"] = False
+    if prior_window is not None:
+        extra["prior_window"] = bool(prior_window)
     est = PoseEstimator(load_rig(root / "rig.yaml"), bundle=bundle, threads=threads, use_prior=True, **extra)
     centre = np.asarray(est.bundle.centre, dtype=np.float64)
     rows = []
@@ -173,8 +173,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="frames a valid pose stays the prior without another (default: the estimator's)")
     e.add_argument("--position-window", action="store_true",
                    help="take the next frame's window from a position-only frame too (PoseEstimator position_window)")
-    e.add_argument("--no-prior-window", action="store_true",
-                   help="every frame's stereo window from the coarse pass (PoseEstimator prior_window=False)")
+    e.add_argument("--prior-window", action=argparse.BooleanOptionalAction, default=None,
+                   help="the frame after a valid pose takes its stereo window from that pose (PoseEstimator "
+                        "prior_window; default: the estimator's, off since session 30); --no-prior-window: the "
+                        "coarse pass on every frame")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     if args.cmd == "render":
@@ -187,7 +189,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wrote {args.frames} frames to {args.out}")
         return 0
     report = evaluate_sequence(args.folder, args.bundle, args.threads, args.prior_max_gap, args.position_window,
-                               prior_window=not args.no_prior_window)
+                               prior_window=args.prior_window)
     print("frame   status        tracked  e_t m   e_R deg")
     for row in report["frames"]:
         print(f"{row['frame']}  {row['status']:<12}  {str(row['tracked']):<7}  "

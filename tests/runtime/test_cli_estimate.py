@@ -115,3 +115,21 @@ def test_prior_max_gap_option(setup, tmp_path, capsys, monkeypatch):
     with pytest.raises(SystemExit):
         main(_args(root, seq, bundle, tmp_path / "c.jsonl", "--prior-max-gap", "-1"))
     assert ">= 0" in capsys.readouterr().err and not (tmp_path / "c.jsonl").exists()
+
+
+def test_prior_window_option(setup, tmp_path, monkeypatch):
+    """--prior-window brings back the window from the previous pose; by default every frame runs the coarse pass."""
+    root, seq, bundle = setup
+    import spacepose.estimator as est_mod
+
+    seen = []
+    real_init = est_mod.PoseEstimator.__init__
+
+    def spy(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        seen.append(self.prior_window)
+
+    monkeypatch.setattr(est_mod.PoseEstimator, "__init__", spy)
+    assert main(_args(root, seq, bundle, tmp_path / "a.jsonl", "--prior-window")) == 0
+    assert main(_args(root, seq, bundle, tmp_path / "b.jsonl")) == 0
+    assert seen == [True, False]

@@ -63,9 +63,16 @@ def test_calib_from_file_and_grey_uint16(bundle, tmp_path):
 
 
 @pytest.fixture()
-def stereo_hints(estimator, monkeypatch):
-    """The ROI hint of every stereo pass the estimator runs, in order."""
+def windowed(bundle):
+    """An estimator whose frame after a valid pose takes its window from that pose (``prior_window``)."""
+    return PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, prior_window=True)
+
+
+@pytest.fixture()
+def stereo_hints(windowed, monkeypatch):
+    """The ROI hint of every stereo pass the ``windowed`` estimator runs, in order."""
     hints = []
+    estimator = windowed
     original = estimator.stereo.match
 
     def spy(left, right, roi_hint=None):
@@ -76,8 +83,8 @@ def stereo_hints(estimator, monkeypatch):
     return hints
 
 
-def test_prior_skips_coarse_pass(estimator, stereo_hints):
-    hints = stereo_hints
+def test_prior_skips_coarse_pass(windowed, stereo_hints):
+    estimator, hints = windowed, stereo_hints
     left, right = synthetic_pair()
     assert estimator.estimate(left, right).valid
     estimator.estimate(left, right)
@@ -93,7 +100,7 @@ def test_prior_skips_coarse_pass(estimator, stereo_hints):
 def test_prior_outlives_up_to_gap_frames_without_a_valid_pose(bundle, gap):
     """An eclipse (dark frames, no_target) ages the prior; it expires after ``prior_max_gap`` such frames. A
     bad frame (bad_input) leaves it as it was."""
-    est = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, prior_max_gap=gap)
+    est = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, prior_max_gap=gap, prior_window=True)
     left, right = synthetic_pair()
     dark = (np.zeros_like(left), np.zeros_like(right))
     assert est.estimate(left, right).valid
@@ -109,7 +116,8 @@ def test_prior_outlives_up_to_gap_frames_without_a_valid_pose(bundle, gap):
     assert est.estimate(left, right).valid and est._valid_prior() is not None   # a valid pose restarts it
 
 
-def test_a_bad_frame_keeps_the_window(estimator):
+def test_a_bad_frame_keeps_the_window(windowed):
+    estimator = windowed
     left, right = synthetic_pair()
     assert estimator.estimate(left, right).valid
     assert estimator.estimate(left, right[:, :-1]).status == "bad_input"
@@ -138,9 +146,9 @@ def test_prior_max_gap_is_checked(bundle):
         PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, prior_max_gap=-1)
 
 
-def test_prior_that_lost_the_target_falls_back_to_the_coarse_pass(estimator, stereo_hints, monkeypatch):
+def test_prior_that_lost_the_target_falls_back_to_the_coarse_pass(windowed, stereo_hints, monkeypatch):
     """Frames that are not a sequence: a stale prior window must not cost the pose."""
-    hints = stereo_hints
+    estimator, hints = windowed, stereo_hints
     left, right = synthetic_pair()
     assert estimator.estimate(left, right).valid
     # a stale prior: the previous pose put the target in the bottom-right corner, where this frame
@@ -220,6 +228,21 @@ def test_photometric_check_off_by_default(bundle, monkeypatch):
     monkeypatch.setattr(est_mod, "photometric_consistency", lambda *a, **k: pytest.fail("check ran while disabled"))
     assert bundle.voting.min_photo_consistency == -1.0
     assert PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1).estimate(*synthetic_pair()).valid
+
+
+@pytest.mark.parametrize("prior_window", [True, False])
+def test_the_prior_window_option(bundle, monkeypatch, prior_window):
+    """prior_window=False: the frame after a valid pose runs the coarse pass too, and the prior still stands
+    (it decides a pose from its flip); True: that frame's window is the previous pose's."""
+    est = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1, prior_window=prior_window)
+    hints = []
+    original = est.stereo.match
+    monkeypatch.setattr(est.stereo, "match", lambda l, r, roi_hint=None: hints.append(roi_hint) or original(l, r, roi_hint))
+    left, right = synthetic_pair()
+    assert est.estimate(left, right).valid and est._valid_prior() is not None
+    assert est.estimate(left, right).valid and est._valid_prior() is not None
+    assert hints[0] is None and (hints[1] is not None) == prior_window
+    assert (est._roi_hint() is not None) == prior_window
 
 
 def test_no_prior_option(bundle, monkeypatch):

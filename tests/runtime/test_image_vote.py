@@ -261,6 +261,7 @@ def test_the_estimator_gives_the_left_image_to_the_vote_and_reports_it(tmp_path,
     # the same frame, the vote against it: undecided, and the reason names the outline
     monkeypatch.setattr(estimator_module, "decide_outline", lambda *a, **k: dataclasses.replace(
         decide(*a, **k), vote=ImageVote(-0.25, 500, 0.0, 0.1, True)))
+    est.reset()   # without a prior: the previous pose would otherwise decide the frame (tracking)
     res = est.estimate(left, right)
     assert not res.valid and res.status == "weak_votes" and "outline does not decide" in res.detail
     assert res.outline_image_score == -0.25
