@@ -425,7 +425,11 @@ def _confidence_main(parser: argparse.ArgumentParser, args: argparse.Namespace,
     if model.uncertainty is None:
         parser.error("the bundle has no uncertainty section: the confidence needs its sigmas")
     if args.fit:
-        tolerance = ConfidenceConfig(position_m=args.tolerance[0], rotation_deg=args.tolerance[1], bias=0.0, slope=1.0)
+        try:
+            tolerance = ConfidenceConfig(position_m=args.tolerance[0], rotation_deg=args.tolerance[1], bias=0.0,
+                                         slope=1.0)
+        except ValueError as err:
+            parser.error(f"--tolerance: {err}")
     elif model.confidence is None:
         parser.error("the bundle has no confidence section: pass --fit, or a bundle with one")
     else:
@@ -434,7 +438,11 @@ def _confidence_main(parser: argparse.ArgumentParser, args: argparse.Namespace,
     within = [within_tolerance(err, tolerance) for _, err, _ in per_report]
     config = tolerance
     if args.fit:
-        config = fit_confidence(np.concatenate(p), np.concatenate(within), tolerance.position_m, tolerance.rotation_deg)
+        try:
+            config = fit_confidence(np.concatenate(p), np.concatenate(within), tolerance.position_m,
+                                    tolerance.rotation_deg)
+        except ValueError as err:
+            parser.error(f"cannot fit the confidence on these reports: {err}")
         out["fit"] = asdict(config)
         print(json.dumps({"confidence": out["fit"]}, indent=1))
     out["check"] = {}

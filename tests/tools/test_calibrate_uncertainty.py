@@ -325,3 +325,9 @@ def test_the_command_fits_and_checks_the_confidence(tmp_path, capsys):
     assert '"confidence"' in capsys.readouterr().out
     with pytest.raises(SystemExit):
         main([str(report), "--confidence", "--positions"])   # one of the two
+    with pytest.raises(SystemExit):
+        main([str(report), "--confidence", "--fit", "--tolerance", "0", "2"])   # a typed refusal, not a traceback
+    few = tmp_path / "few.json"
+    few.write_text(json.dumps({"focal_px": FOCAL, "frames": _confidence_rows(shipped, n=10)}))
+    with pytest.raises(SystemExit):
+        main([str(few), "--confidence", "--fit"])
