@@ -595,9 +595,10 @@ class PoseEstimator:
 
     def _pose_confidence(self, spread: PoseUncertainty | None) -> float:
         """The bundle's ``confidence`` model for a valid pose's uncertainty ``spread`` (0 without one, or
-        without a finite rotation sigma: no accuracy is claimed)."""
+        without finite positive sigmas: no accuracy is claimed)."""
         config = self.bundle.confidence
-        if config is None or spread is None or not math.isfinite(spread.sigma_rotation_deg):
+        sigmas = () if spread is None else (spread.sigma_range_m, spread.sigma_lateral_m, spread.sigma_rotation_deg)
+        if config is None or not sigmas or not all(math.isfinite(v) and v > 0.0 for v in sigmas):
             return 0.0
         p = within_probability(spread.sigma_range_m, spread.sigma_lateral_m, spread.sigma_rotation_deg, config)
         return calibrated_confidence(p, config)

@@ -177,5 +177,13 @@ def test_a_valid_pose_without_a_rotation_sigma_claims_no_accuracy(tmp_path, monk
     monkeypatch.setattr(estimator_module, "pose_uncertainty", no_rotation)
     res = est.estimate(left, right)
     assert res.valid and res.confidence == 0.0 and np.all(np.isfinite(res.position_cov))
+
+    def zero_rotation(*args, **kwargs):   # constants without a rotation term and a chamfer of 0: sigma 0
+        spread = original(*args, **kwargs)
+        return PoseUncertainty(spread.position_cov, spread.sigma_range_m, spread.sigma_lateral_m, 0.0)
+
+    monkeypatch.setattr(estimator_module, "pose_uncertainty", zero_rotation)
+    res = est.estimate(left, right)
+    assert res.valid and res.confidence == 0.0
     res = est.estimate(np.zeros_like(left), np.zeros_like(right))   # eclipse: no pose, no confidence
     assert not res.valid and res.confidence == 0.0 and res.decision_confidence == 0.0
