@@ -1,9 +1,10 @@
 """The sequences of session 30's look at the uncertainty and confidence of poses in sequences (tracking).
 
-    python reports/sequence_s30/sequences.py fit|check   # prints one render and one eval command per sequence
+    python reports/sequence_s30/sequences.py fit|check|check2   # one render and one eval command per sequence
 
 ``fit``: 24 sequences, seeds 3011-3034 (spent for exploration and fitting). ``check``: 16 sequences, seeds
-3051-3066, rendered only after reports/sequence_s30/rule.txt is committed (if one is written). Each: 40 frames at
+3051-3066, rendered only after reports/sequence_s30/rule.txt was committed. ``check2``: 16 sequences, seeds
+3071-3086, rendered only after reports/sequence_s30/rule2.txt was committed. Each: 40 frames at
 640x480 on the paper rig; the distance, regime and rate cycle over the grids below, so that every set mixes them.
 The eval uses the shipped bundle with the prior, as a flight computer runs it (``sequence eval``).
 """
@@ -14,7 +15,7 @@ import sys
 DISTANCES = (12, 16, 20, 24, 28, 32, 36, 40)
 REGIMES = ("sun", "albedo", "penumbra", "mixed")
 RATES = (1, 2, 3)
-SETS = {"fit": (3011, 24, "seq_f"), "check": (3051, 16, "seq_c")}
+SETS = {"fit": (3011, 24, "seq_f"), "check": (3051, 16, "seq_c"), "check2": (3071, 16, "seq_d")}
 
 
 def sequences(which: str) -> list[tuple[str, int, int, str, int]]:
