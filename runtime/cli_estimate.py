@@ -43,8 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the frame after a valid pose takes its stereo window from that pose, skipping the coarse "
                              "pass (off by default since session 30: poses on it were worse, see the model card)")
     parser.add_argument("--prior-max-gap", type=non_negative_int, default=None, metavar="N",
-                        help="frames a valid pose stays the prior while none is valid (default 0: the next frame only; "
-                             "more keeps more chains but also more wrong poses, see the model card)")
+                        help="frames a valid pose stays the prior while none is valid (default 2 since session 30; 0: the "
+                             "next frame only; see the model card)")
     parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
 
 

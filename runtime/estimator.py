@@ -66,9 +66,9 @@ logger = logging.getLogger(__name__)
 DARK_FRACTION = 0.02
 #: a frame with more than this fraction of pixels at full scale is "saturated"
 SATURATED_FRACTION = 0.5
-#: frames a valid pose stays the prior after it while no other is valid (see ``PoseEstimator``): 0, the
-#: frame right after only. 5 gave more valid poses in rendered sequences, but more wrong ones too (model card)
-PRIOR_MAX_GAP = 0
+#: frames a valid pose stays the prior after it while no other is valid (see ``PoseEstimator``): 2 since
+#: session 30 (0 before: with the previous pose's window, 5 gave more wrong poses; model card)
+PRIOR_MAX_GAP = 2
 #: statuses after which a frame run in the previous pose's window is run again with the coarse pass
 _WINDOW_MISSES = frozenset({"no_target", "too_few_points", "out_of_range", "fit_residual"})
 #: factors holding the registered centre (camera frame) of a frame that reached the flip decision
@@ -346,10 +346,12 @@ class PoseEstimator:
             frames a stale window cost valid poses). The tracking gates
             (``registration.track_max_deg`` / ``track_max_m``) are not widened for the gap, so after a
             longer gap the target must still be within them of the old pose (a flip, 180° away, never
-            is). Measured on rendered sequences (session 13, ``python -m spacepose.tools.sequence
-            eval``): on 14 blind ones, 5 instead of 0 gave 349 instead of 291 valid frames of 560, no
-            flip, but 20 instead of 8 valid poses off by more than 20° or 0.5 m, so the default stays
-            0 (see the model card).
+            is). Measured on rendered sequences (``python -m spacepose.tools.sequence eval``): in session 13,
+            with the previous pose's window, 5 instead of 0 gave 349 instead of 291 valid frames of 560 on 14
+            blind ones, no flip, but 20 instead of 8 valid poses off by more than 20° or 0.5 m. In session 30,
+            with the coarse pass on every frame, 2 instead of 0 gave 239 instead of 211 valid poses on 16 fresh
+            sequences, 1 wrong either way, 86 instead of 80 within 0.10 m and 2° (``reports/sequence_s30/rule2.txt``):
+            the default since.
         refine: point-to-plane ICP against the stereo points (needs ``surface_points`` in the bundle).
         seed: seed of the point sampling and MeanShift seeds (results are deterministic).
         position_window: with ``use_prior``, a frame right after one that reported only a position
