@@ -5,7 +5,9 @@
 RUNS (default ``runs/s30``) holds ``sequence eval`` reports: for the fit sequences ``nopw_seq_fNN.json`` (gap 0,
 the coarse pass on every frame) and ``gap2_seq_fNN.json`` (``--prior-max-gap 2``, run from commit 33bab31, whose
 default is the coarse pass); for the check sequences (``python reports/sequence_s30/sequences.py check2``, run from
-commit 23586c9) ``seq_dNN.json`` (that commit's default: gap 0, the coarse pass) and ``gap2_seq_dNN.json``. When every run is
+commit 23586c9) ``seq_dNN.json`` (that commit's default: gap 0, the coarse pass) and ``gap2_seq_dNN.json``; reported only, after both
+verdicts, ``s29def_seq_dNN.json``: session 29's defaults (``--prior-window --prior-max-gap 0``), so that the two
+changes together can be read against them on the same fresh scenes. When every run is
 there, the frames are cut to the columns used here and written to ``rows2.json.gz`` beside this script; otherwise
 that committed file is read.
 """
@@ -22,7 +24,7 @@ from judge import HEAD, KEYS, _line, summary  # noqa: E402
 from sequences import sequences  # noqa: E402
 
 MODES = {("fit", "gap 0"): "nopw_{}", ("fit", "gap 2"): "gap2_{}", ("check2", "gap 0"): "{}",
-         ("check2", "gap 2"): "gap2_{}"}
+         ("check2", "gap 2"): "gap2_{}", ("check2", "s29 defaults"): "s29def_{}"}
 
 
 def main(argv: list[str]) -> int:
@@ -36,7 +38,7 @@ def main(argv: list[str]) -> int:
         frames = [r for name, *_ in sequences(which) for r in rows[pattern.format(name)]]
         results[which, mode] = summary(frames)
         print(_line(which, mode, results[which, mode]))
-    print("(columns as in judge.py)")
+    print("(columns as in judge.py; the s29 defaults row is reported only: the previous pose's window and gap 0)")
     old, new = results["check2", "gap 0"], results["check2", "gap 2"]
     fails = []
     fails += [f"1. > 90 deg {new['flips']} > 0"] if new["flips"] > 0 else []
