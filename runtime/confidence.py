@@ -27,11 +27,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 from functools import lru_cache
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
-from .errors import BundleError
+from .uncertainty import parse_number_section
 
 __all__ = ["ConfidenceConfig", "within_probability", "position_within_probability", "rotation_within_probability",
            "calibrated_confidence", "parse_confidence", "P_CLIP"]
@@ -116,15 +116,4 @@ def calibrated_confidence(p: float, config: ConfidenceConfig) -> float:
 
 def parse_confidence(section: Any) -> ConfidenceConfig | None:
     """The bundle's ``confidence`` section (``None`` when absent); ``BundleError`` when malformed."""
-    if section is None:
-        return None
-    if not isinstance(section, Mapping):
-        raise BundleError(f"bundle.json: confidence must be an object, got {type(section).__name__}")
-    names = [f.name for f in fields(ConfidenceConfig)]
-    unknown, missing = sorted(set(section) - set(names)), [n for n in names if n not in section]
-    if unknown or missing:
-        raise BundleError(f"bundle.json: confidence has unknown keys {unknown} / lacks {missing}")
-    try:
-        return ConfidenceConfig(**section)
-    except ValueError as err:
-        raise BundleError(f"bundle.json: {err}") from err
+    return parse_number_section(section, "confidence", ConfidenceConfig)

@@ -187,15 +187,18 @@ def _line_of_sight_cov(u: np.ndarray, sigma_range: float, sigma_lateral: float) 
 
 def parse_uncertainty(section: Any) -> UncertaintyConfig | None:
     """The bundle's ``uncertainty`` section (``None`` when absent); BundleError when malformed."""
-    return _parse(section, "uncertainty", UncertaintyConfig, optional=("rotation_chamfer_deg",))
+    return parse_number_section(section, "uncertainty", UncertaintyConfig, optional=("rotation_chamfer_deg",))
 
 
 def parse_position_uncertainty(section: Any) -> PositionUncertaintyConfig | None:
     """The bundle's ``position_uncertainty`` section (``None`` when absent); BundleError when malformed."""
-    return _parse(section, "position_uncertainty", PositionUncertaintyConfig)
+    return parse_number_section(section, "position_uncertainty", PositionUncertaintyConfig)
 
 
-def _parse(section: Any, name: str, cls: type, optional: tuple[str, ...] = ()) -> Any:
+def parse_number_section(section: Any, name: str, cls: type, optional: tuple[str, ...] = ()) -> Any:
+    """``cls(**section)`` for a bundle section ``name`` whose every field is a number (``None`` when the section is
+    absent); ``BundleError`` when it is not an object, has unknown keys, lacks one not in ``optional``, holds a
+    value that is not a number, or ``cls`` refuses the values."""
     if section is None:
         return None
     if not isinstance(section, Mapping):

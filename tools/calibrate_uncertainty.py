@@ -55,7 +55,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["NOMINAL", "pose_errors", "position_errors", "wrong_poses", "fit_uncertainty", "fit_position_uncertainty",
            "coverage", "position_coverage", "format_coverage", "format_position_coverage", "normal_within",
-           "within_tolerance", "fit_confidence", "confidence_check", "format_confidence_check", "main"]
+           "model_sigmas", "within_tolerance", "fit_confidence", "confidence_check", "format_confidence_check", "main"]
 
 # a normal distribution's share within the sigma-equivalent bounds that ``coverage`` counts
 NOMINAL = {"range_1": 0.6827, "range_2": 0.9545, "lateral_1": 1.0 - math.exp(-0.5), "lateral_2": 1.0 - math.exp(-2.0),
@@ -167,19 +167,25 @@ def fit_position_uncertainty(err: dict[str, np.ndarray]) -> PositionUncertaintyC
                                      lateral_chamfer_m=float(np.sqrt(lat[2])))
 
 
+def model_sigmas(err: dict[str, np.ndarray], config: UncertaintyConfig, focal_px: float | None) -> np.ndarray:
+    """(n, 3) the sigmas ``config`` gives each :func:`pose_errors` pose (range m, lateral m, rotation deg),
+    recomputed from its ``tau``, ``z`` and chamfer with ``focal_px``; NaN where it gives none."""
+    sig = np.full((len(err["range"]), 3), np.nan)
+    for i in range(len(sig)):
+        spread = pose_uncertainty(np.array([0.0, 0.0, err["z"][i]]), float(err["tau"][i]), float(focal_px), config,
+                                  float(err["chamfer"][i]))
+        if spread is not None:
+            sig[i] = spread.sigma_range_m, spread.sigma_lateral_m, spread.sigma_rotation_deg
+    return sig
+
+
 def normal_within(err: dict[str, np.ndarray], config: UncertaintyConfig, focal_px: float,
                   tolerance: ConfidenceConfig) -> np.ndarray:
     """(n,) the normal model's probability ``p`` (:func:`spacepose.confidence.within_probability`) that each
     :func:`pose_errors` pose is within ``tolerance``'s ``position_m`` and ``rotation_deg``, from the sigmas of
     ``config`` (recomputed from ``tau``, ``z`` and the chamfer with ``focal_px``); NaN where it has none."""
-    out = np.full(len(err["range"]), np.nan)
-    for i in range(len(out)):
-        spread = pose_uncertainty(np.array([0.0, 0.0, err["z"][i]]), float(err["tau"][i]), float(focal_px), config,
-                                  float(err["chamfer"][i]))
-        if spread is not None and math.isfinite(spread.sigma_rotation_deg):
-            out[i] = within_probability(spread.sigma_range_m, spread.sigma_lateral_m, spread.sigma_rotation_deg,
-                                        tolerance)
-    return out
+    return np.array([within_probability(*sig, tolerance) if np.all(np.isfinite(sig)) else np.nan
+                     for sig in model_sigmas(err, config, focal_px)])
 
 
 def within_tolerance(err: dict[str, np.ndarray], tolerance: ConfidenceConfig) -> np.ndarray:
@@ -262,12 +268,7 @@ def coverage(err: dict[str, np.ndarray], config: UncertaintyConfig | None = None
     with ``focal_px``), or without it the ones the rows recorded (``sigma_*``; poses without any are left
     out)."""
     if config is not None:
-        n = len(err["range"])
-        sig = np.empty((n, 3))
-        for i in range(n):
-            spread = pose_uncertainty(np.array([0.0, 0.0, err["z"][i]]), float(err["tau"][i]), float(focal_px),
-                                      config, float(err["chamfer"][i]))
-            sig[i] = spread.sigma_range_m, spread.sigma_lateral_m, spread.sigma_rotation_deg
+        sig = model_sigmas(err, config, focal_px)
         keep = np.all(np.isfinite(sig), axis=1)
     else:
         sig = np.stack([err["sigma_range_m"], err["sigma_lateral_m"], err["sigma_rotation_deg"]], axis=1)

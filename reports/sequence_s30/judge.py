@@ -29,12 +29,12 @@ from spacepose.bundle import load_bundle  # noqa: E402
 from spacepose.confidence import calibrated_confidence  # noqa: E402
 from spacepose.tools.calibrate_uncertainty import (confidence_check, normal_within, pose_errors,  # noqa: E402
                                                    within_tolerance)
+from spacepose.tools.eval_pose import BAR_R_DEG, BAR_T_M  # noqa: E402
 
 KEYS = ("frame", "valid", "tracked", "e_t", "e_R", "position_valid", "stereo_ms", "roi", "depth_tolerance_m",
         "position", "outline_chamfer_px", "e_pos", "e_pos_los")
 MODES = {"prior window": "{}", "coarse window": "nopw_{}"}
-WRONG_DEG, WRONG_M = 20.0, 0.5
-BAR_M, BAR_DEG = 0.10, 2.0
+WRONG_DEG, WRONG_M = 20.0, 0.5   # on e_t here (calibrate_uncertainty's wrong_poses uses the centre's miss)
 FOCAL = 800.0   # 640x480 on the paper rig
 
 
@@ -44,18 +44,18 @@ def _rows(runs: Path) -> dict[str, list[dict]]:
     return compact_rows(files, HERE / "rows.json.gz", KEYS, defaults={"roi": None})
 
 
-def summary(frames: list[dict]) -> dict[str, float]:
+def summary(frames: list[dict], bundle) -> dict[str, float]:
+    """The table's columns for ``frames``; the confidence from ``bundle``'s uncertainty and confidence sections."""
     v = [r for r in frames if r["valid"]]
     e_t, e_R = np.array([r["e_t"] for r in v]), np.array([r["e_R"] for r in v])
     sides = [r["roi"][2] - r["roi"][0] for r in v if r.get("roi")]
-    bundle = load_bundle(None, verify_graphs=False)
     err = pose_errors(v, FOCAL)
     p = normal_within(err, bundle.uncertainty, FOCAL, bundle.confidence)
     conf = np.array([calibrated_confidence(x, bundle.confidence) for x in p])
     check = confidence_check(conf, within_tolerance(err, bundle.confidence), err["e_t"], err["e_R"])
     return {"frames": len(frames), "valid": len(v), "tracked": sum(bool(r["tracked"]) for r in v),
             "wrong": int(np.sum((e_R > WRONG_DEG) | (e_t > WRONG_M))), "flips": int(np.sum(e_R > 90.0)),
-            "within": int(np.sum((e_t <= BAR_M) & (e_R <= BAR_DEG))),
+            "within": int(np.sum((e_t <= BAR_T_M) & (e_R <= BAR_R_DEG))),
             "e_t_mean": float(e_t.mean()), "e_t_median": float(np.median(e_t)),
             "e_R_mean": float(e_R.mean()), "e_R_median": float(np.median(e_R)),
             "position_valid": sum(bool(r["position_valid"]) for r in frames),
@@ -79,13 +79,14 @@ def _line(which: str, mode: str, s: dict[str, float]) -> str:
 
 def main(argv: list[str]) -> int:
     rows = _rows(Path(argv[0]) if argv else Path("runs/s30"))
+    bundle = load_bundle(None, verify_graphs=False)
     results = {}
     print(HEAD)
     for which in ("fit", "check"):
         names = [name for name, *_ in sequences(which)]
         for mode, pattern in MODES.items():
             frames = [r for name in names for r in rows[pattern.format(name)]]
-            results[which, mode] = summary(frames)
+            results[which, mode] = summary(frames, bundle)
             print(_line(which, mode, results[which, mode]))
     print("(wrong: e_R > 20 deg or e_t > 0.5 m; within: e_t <= 0.10 m and e_R <= 2 deg; pos: frames with a position; "
           "stereo ms: median per frame of the stereo stage, one thread; window: median side of a valid pose's stereo "

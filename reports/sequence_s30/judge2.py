@@ -23,6 +23,8 @@ from _rows import compact_rows  # noqa: E402
 from judge import HEAD, KEYS, _line, summary  # noqa: E402
 from sequences import sequences  # noqa: E402
 
+from spacepose.bundle import load_bundle  # noqa: E402
+
 MODES = {("fit", "gap 0"): "nopw_{}", ("fit", "gap 2"): "gap2_{}", ("check2", "gap 0"): "{}",
          ("check2", "gap 2"): "gap2_{}", ("check2", "s29 defaults"): "s29def_{}"}
 
@@ -32,11 +34,12 @@ def main(argv: list[str]) -> int:
     files = {pattern.format(name): [runs / f"{pattern.format(name)}.json"]
              for (which, _), pattern in MODES.items() for name, *_ in sequences(which)}
     rows = compact_rows(files, HERE / "rows2.json.gz", KEYS, defaults={"roi": None})
+    bundle = load_bundle(None, verify_graphs=False)
     results = {}
     print(HEAD)
     for (which, mode), pattern in MODES.items():
         frames = [r for name, *_ in sequences(which) for r in rows[pattern.format(name)]]
-        results[which, mode] = summary(frames)
+        results[which, mode] = summary(frames, bundle)
         print(_line(which, mode, results[which, mode]))
     print("(columns as in judge.py; the s29 defaults row is reported only: the previous pose's window and gap 0)")
     old, new = results["check2", "gap 0"], results["check2", "gap 2"]

@@ -114,19 +114,12 @@ UNCERTAINTY = {"range_k": 0.3, "lateral_px": 0.5, "lateral_floor_m": 0.02, "rota
                "rotation_floor_deg": 0.0, "rotation_chamfer_deg": 1.5}
 
 
-def _estimator(tmp_path, monkeypatch, sections):
-    """test_uncertainty's estimator (its registration decides a valid pose) with ``sections`` added to
-    the bundle."""
-    from test_flip_classifier import _flip_estimator
+def _estimator(tmp_path, monkeypatch, more=None):
+    """test_uncertainty's estimator (its registration decides a valid pose, with UNCERTAINTY) with ``more``
+    sections added to the bundle."""
+    from test_uncertainty import _estimator as uncertainty_estimator
 
-    from spacepose.calibration.rig import paper_rig
-    from spacepose.estimator import PoseEstimator
-
-    est = _flip_estimator(tmp_path, monkeypatch, 0.95, registration={"min_margin": 0.0}, decide_prob=0.999)
-    data = json.loads((est.bundle.path / "bundle.json").read_text())
-    data.update(sections)
-    (est.bundle.path / "bundle.json").write_text(json.dumps(data))
-    return PoseEstimator(paper_rig(640, 480), bundle=load_bundle(est.bundle.path), threads=1)
+    return uncertainty_estimator(tmp_path, monkeypatch, UNCERTAINTY, more)
 
 
 def test_a_valid_pose_reports_the_probability_and_keeps_its_decision(tmp_path, monkeypatch):
@@ -136,9 +129,8 @@ def test_a_valid_pose_reports_the_probability_and_keeps_its_decision(tmp_path, m
 
     left, right = synthetic_pair()
     results = {}
-    for name, sections in (("off", {"uncertainty": UNCERTAINTY}),
-                           ("on", {"uncertainty": UNCERTAINTY, "confidence": SECTION})):
-        est = _estimator(tmp_path / name, monkeypatch, sections)
+    for name, more in (("off", None), ("on", {"confidence": SECTION})):
+        est = _estimator(tmp_path / name, monkeypatch, more)
         monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 1.2, 0.3))
         results[name] = est.estimate(left, right)
     off, on = results["off"], results["on"]
@@ -166,7 +158,7 @@ def test_a_valid_pose_without_a_rotation_sigma_claims_no_accuracy(tmp_path, monk
     from spacepose.uncertainty import PoseUncertainty
 
     left, right = synthetic_pair()
-    est = _estimator(tmp_path, monkeypatch, {"uncertainty": UNCERTAINTY, "confidence": SECTION})
+    est = _estimator(tmp_path, monkeypatch, {"confidence": SECTION})
     monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 1.2, 0.3))
     original = estimator_module.pose_uncertainty
 

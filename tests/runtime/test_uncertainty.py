@@ -124,9 +124,9 @@ def test_the_bundle_section_needs_registration(tmp_path):
     assert load_bundle(make_bundle(tmp_path / "none")).uncertainty is None
 
 
-def _estimator(tmp_path, monkeypatch, section):
+def _estimator(tmp_path, monkeypatch, section, more=None):
     """test_flip_classifier's estimator whose registration decides a valid pose, with ``section`` as the
-    bundle's uncertainty section (None: none)."""
+    bundle's uncertainty section (None: none) and the sections of ``more`` added."""
     from test_flip_classifier import _flip_estimator
 
     from spacepose.calibration.rig import paper_rig
@@ -136,6 +136,7 @@ def _estimator(tmp_path, monkeypatch, section):
     data = json.loads((est.bundle.path / "bundle.json").read_text())
     if section is not None:
         data["uncertainty"] = section
+    data.update(more or {})
     (est.bundle.path / "bundle.json").write_text(json.dumps(data))
     return PoseEstimator(paper_rig(640, 480), bundle=load_bundle(est.bundle.path), threads=1)
 

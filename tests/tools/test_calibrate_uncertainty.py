@@ -19,23 +19,31 @@ TRUE = UncertaintyConfig(range_k=0.2, lateral_px=1.0, lateral_floor_m=0.02, rota
 FOCAL = 800.0
 
 
-def _rows(config, n=4000, seed=0, focal=FOCAL):
-    """eval-pose rows of valid poses whose errors are drawn from ``config``'s normal model."""
+def _rows(config, n=4000, seed=0, focal=FOCAL, tails=None):
+    """eval-pose rows of valid poses whose errors are drawn from ``config``'s normal model (``tails``: Student-t
+    degrees of freedom for heavier-tailed errors of the same variance), then one invalid row. ``e_t`` is the
+    centre's miss: the translation error of a target whose centre is its origin."""
     rng = np.random.default_rng(seed)
+
+    def draw(sigma, size=None):
+        if tails is None:
+            return rng.normal(0.0, sigma, size)
+        return rng.standard_t(tails, size) * sigma * math.sqrt((tails - 2.0) / tails)
+
     rows = []
     for _ in range(n):
         z = rng.uniform(10.0, 50.0)
         tau = max(0.15, z ** 2 * 0.25 / (focal * 1.0))
         chamfer = rng.uniform(0.4, 2.5)
         spread = pose_uncertainty(np.array([0.0, 0.0, z]), tau, focal, config, chamfer)
-        e_range = rng.normal(0.0, spread.sigma_range_m)
-        e_lat = np.linalg.norm(rng.normal(0.0, spread.sigma_lateral_m, 2))
-        e_R = np.linalg.norm(rng.normal(0.0, spread.sigma_rotation_deg, 3))
+        e_range = float(draw(spread.sigma_range_m))
+        e_lat = np.linalg.norm(draw(spread.sigma_lateral_m, 2))
+        e_R = np.linalg.norm(draw(spread.sigma_rotation_deg, 3))
+        e_pos = math.hypot(e_range, e_lat)
         rows.append({"valid": True, "depth_tolerance_m": tau, "position": [0.0, 0.0, z + e_range],
-                     "e_pos_los": e_range, "e_pos": math.hypot(e_range, e_lat), "e_R": e_R,
-                     "outline_chamfer_px": chamfer})
+                     "e_pos_los": e_range, "e_pos": e_pos, "e_t": e_pos, "e_R": e_R, "outline_chamfer_px": chamfer})
     rows.append({"valid": False, "depth_tolerance_m": float("nan"), "position": [float("nan")] * 3,
-                 "e_pos_los": float("nan"), "e_pos": float("nan"), "e_R": float("nan")})
+                 "e_pos_los": float("nan"), "e_pos": float("nan"), "e_t": float("nan"), "e_R": float("nan")})
     return rows
 
 
@@ -227,37 +235,12 @@ def test_the_eval_report_carries_both_coverages_from_the_recorded_sigmas():
 TOLERANCE = ConfidenceConfig(position_m=0.10, rotation_deg=2.0, bias=0.0, slope=1.0)
 
 
-def _confidence_rows(config, n=6000, seed=0, focal=FOCAL, tails=None):
-    """:func:`_rows` with ``e_t`` (the centre's miss: the translation error of a target whose centre is its
-    origin); ``tails``: Student-t degrees of freedom for heavier-tailed errors of the same variance (None: normal)."""
-    rng = np.random.default_rng(seed)
-
-    def draw(sigma, size):
-        if tails is None:
-            return rng.normal(0.0, sigma, size)
-        return rng.standard_t(tails, size) * sigma * math.sqrt((tails - 2.0) / tails)
-
-    rows = []
-    for _ in range(n):
-        z = rng.uniform(10.0, 50.0)
-        tau = max(0.15, z ** 2 * 0.25 / (focal * 1.0))
-        chamfer = rng.uniform(0.4, 2.5)
-        spread = pose_uncertainty(np.array([0.0, 0.0, z]), tau, focal, config, chamfer)
-        e_range = float(draw(spread.sigma_range_m, 1)[0])
-        e_lat = float(np.linalg.norm(draw(spread.sigma_lateral_m, 2)))
-        e_R = float(np.linalg.norm(draw(spread.sigma_rotation_deg, 3)))
-        e_pos = math.hypot(e_range, e_lat)
-        rows.append({"valid": True, "depth_tolerance_m": tau, "position": [0.0, 0.0, z + e_range],
-                     "e_pos_los": e_range, "e_pos": e_pos, "e_t": e_pos, "e_R": e_R, "outline_chamfer_px": chamfer})
-    return rows
-
-
 SMALL = UncertaintyConfig(range_k=0.1, lateral_px=0.5, lateral_floor_m=0.01, rotation_k_deg=20.0,
                           rotation_floor_deg=0.3, rotation_chamfer_deg=0.8)   # errors around the 0.10 m / 2 deg bar
 
 
 def test_on_normal_errors_the_confidence_fit_is_the_identity_and_calibrated():
-    err = pose_errors(_confidence_rows(SMALL), FOCAL)
+    err = pose_errors(_rows(SMALL, n=6000), FOCAL)
     p = normal_within(err, SMALL, FOCAL, TOLERANCE)
     within = within_tolerance(err, TOLERANCE)
     assert np.all(np.isfinite(p)) and 0.2 < within.mean() < 0.8
@@ -272,12 +255,12 @@ def test_on_normal_errors_the_confidence_fit_is_the_identity_and_calibrated():
 
 
 def test_heavy_tails_are_recalibrated_by_the_fit():
-    err = pose_errors(_confidence_rows(SMALL, tails=3.0, seed=1), FOCAL)
+    err = pose_errors(_rows(SMALL, n=6000, tails=3.0, seed=1), FOCAL)
     p = normal_within(err, SMALL, FOCAL, TOLERANCE)
     within = within_tolerance(err, TOLERANCE)
     assert p.mean() < within.mean() - 0.05           # same variance, more mass near 0: the normal p is too low
     fit = fit_confidence(p, within)
-    check_err = pose_errors(_confidence_rows(SMALL, tails=3.0, seed=2), FOCAL)
+    check_err = pose_errors(_rows(SMALL, n=6000, tails=3.0, seed=2), FOCAL)
     p2, within2 = normal_within(check_err, SMALL, FOCAL, TOLERANCE), within_tolerance(check_err, TOLERANCE)
     conf = np.array([calibrated_confidence(v, fit) for v in p2])
     raw, fitted = (confidence_check(c, within2, check_err["e_t"], check_err["e_R"]) for c in (p2, conf))
@@ -315,7 +298,7 @@ def test_the_command_fits_and_checks_the_confidence(tmp_path, capsys):
 
     shipped = load_bundle(None, verify_graphs=False).uncertainty
     report = tmp_path / "pose_eval.json"
-    report.write_text(json.dumps({"focal_px": FOCAL, "frames": _confidence_rows(shipped, n=800)}))
+    report.write_text(json.dumps({"focal_px": FOCAL, "frames": _rows(shipped, n=800)}))
     out = tmp_path / "fit.json"
     assert main([str(report), "--confidence", "--fit", "--json", str(out)]) == 0
     data = json.loads(out.read_text())
@@ -328,6 +311,6 @@ def test_the_command_fits_and_checks_the_confidence(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main([str(report), "--confidence", "--fit", "--tolerance", "0", "2"])   # a typed refusal, not a traceback
     few = tmp_path / "few.json"
-    few.write_text(json.dumps({"focal_px": FOCAL, "frames": _confidence_rows(shipped, n=10)}))
+    few.write_text(json.dumps({"focal_px": FOCAL, "frames": _rows(shipped, n=10)}))
     with pytest.raises(SystemExit):
         main([str(few), "--confidence", "--fit"])
