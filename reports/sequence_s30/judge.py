@@ -27,8 +27,8 @@ from sequences import sequences  # noqa: E402
 
 from spacepose.bundle import load_bundle  # noqa: E402
 from spacepose.confidence import calibrated_confidence  # noqa: E402
-from spacepose.tools.calibrate_uncertainty import (confidence_check, normal_within, pose_errors,  # noqa: E402
-                                                   within_tolerance)
+from spacepose.tools.calibrate_uncertainty import (confidence_check, coverage, normal_within,  # noqa: E402
+                                                   pose_errors, within_tolerance)
 from spacepose.tools.eval_pose import BAR_R_DEG, BAR_T_M  # noqa: E402
 
 KEYS = ("frame", "valid", "tracked", "e_t", "e_R", "position_valid", "stereo_ms", "roi", "depth_tolerance_m",
@@ -77,6 +77,38 @@ def _line(which: str, mode: str, s: dict[str, float]) -> str:
             f"{s['confidence_mean']:>7.2f}/{s['share_within']:.2f}{s['spearman_t']:>8.2f}")
 
 
+def by_frame_before(sequence_frames: list[list[dict]]) -> dict[str, list[dict]]:
+    """The valid poses of the sequences, split by what came before: ``tracked`` (decided by the previous pose),
+    ``after a valid frame`` (decided on their own, on the previous pose's window when the run used it) and
+    ``after an invalid frame`` (decided on their own; the window from the coarse pass either way)."""
+    groups: dict[str, list[dict]] = {"tracked": [], "after a valid frame": [], "after an invalid frame": []}
+    for frames in sequence_frames:
+        before = False
+        for r in frames:
+            if r["valid"]:
+                key = "tracked" if r["tracked"] else "after a valid frame" if before else "after an invalid frame"
+                groups[key].append(r)
+            before = bool(r["valid"])
+    return groups
+
+
+def print_split(rows: dict[str, list[dict]], bundle) -> None:
+    """What the rule's exploration saw: the fit sequences' valid poses with the previous pose's window, by the
+    frame before (mean confidence against the share within the bar, and the per-axis normalised squared errors
+    of the uncertainty model)."""
+    print("fit sequences, the previous pose's window, valid poses by the frame before:")
+    split = by_frame_before([rows[name] for name, *_ in sequences("fit")])
+    for key, poses in split.items():
+        err = pose_errors(poses, FOCAL)
+        p = normal_within(err, bundle.uncertainty, FOCAL, bundle.confidence)
+        conf = np.array([calibrated_confidence(x, bundle.confidence) for x in p])
+        check = confidence_check(conf, within_tolerance(err, bundle.confidence), err["e_t"], err["e_R"])
+        cov = coverage(err, bundle.uncertainty, FOCAL)
+        print(f"  {key:<24}{check['poses']:>5} poses | confidence {check['mean_confidence']:.3f}, within "
+              f"{check['share_within']:.3f} | NEES range {cov['nees_range']:.2f}, lateral {cov['nees_lateral']:.2f}, "
+              f"rotation {cov['nees_rotation']:.2f}")
+
+
 def main(argv: list[str]) -> int:
     rows = _rows(Path(argv[0]) if argv else Path("runs/s30"))
     bundle = load_bundle(None, verify_graphs=False)
@@ -92,6 +124,8 @@ def main(argv: list[str]) -> int:
           "stereo ms: median per frame of the stereo stage, one thread; window: median side of a valid pose's stereo "
           "window, px (the fit sequences' prior-window runs did not record it); conf/within: mean confidence and "
           "share within of the valid poses)")
+    print()
+    print_split(rows, bundle)
     old, new = results["check", "prior window"], results["check", "coarse window"]
     fails = []
     fails += [f"1. wrong {new['wrong']} > {old['wrong']}"] if new["wrong"] > old["wrong"] else []
