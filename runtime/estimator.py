@@ -789,7 +789,8 @@ class PoseEstimator:
     def _track(self, reg: Any, prior: tuple[np.ndarray, np.ndarray] | None, outline: Any,
                margin: float) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray] | None] | str:
         """The pose the previous one picks (route 3 of :meth:`_register`): ``((R, t), fallback)``, or why
-        it picks none. The outline-refined fits within ``max_chamfer_px`` are asked first; when exactly
+        it picks none. The outline-refined fits within ``max_chamfer_px`` (or the looser
+        ``track_max_chamfer_px``) are asked first; when exactly
         one is near the prior it is the pose, with the registered candidate near the prior (if any) to
         fall back on. Else the registered candidate near the prior, unless the silhouette stage's
         ``track_needs_outline`` asks for an outline fit (then no fallback either)."""
@@ -799,8 +800,9 @@ class PoseEstimator:
                    if prior is not None and not needs_outline else None)
         refined = []
         if prior is not None and outline is not None:  # the outline-refined poses fit the tracking gates best
+            gate = max(sil.max_chamfer_px, sil.track_max_chamfer_px)
             refined = [(fit.R, fit.t) for fit in (outline.best, outline.other)
-                       if fit.chamfer_px <= sil.max_chamfer_px and near_prior(fit.R, fit.t, prior[0], prior[1], config)]
+                       if fit.chamfer_px <= gate and near_prior(fit.R, fit.t, prior[0], prior[1], config)]
         if tracked is None and len(refined) != 1:
             why = (f"a pose {reg.runner_up_angle_deg:.0f}° away fits the stereo points almost as well "
                    f"(score gap {margin:.4f} < {config.min_margin:.4f})" if margin < config.min_margin else

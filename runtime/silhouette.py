@@ -111,6 +111,11 @@ class SilhouetteConfig:
         had no outline fit within 1.5 px, against 44 of the 439 right ones (the model card). 0 (the
         default, and every bundle without the key): the registered pose near the previous one is reported
         when no refined fit is.
+    track_max_chamfer_px: the chamfer gate (outline px) of the outline-refined fits the tracking route
+        asks (route 3 of :meth:`spacepose.estimator.PoseEstimator`'s registration decision), when larger
+        than ``max_chamfer_px``: near the previous pose, a fit that matches the outline less well is
+        still told from its flip by the prior, where alone it decides nothing. 0 (the default, and every
+        bundle without the key): ``max_chamfer_px``.
     image_exclusion_px: band (frame px) around each outline left out of the vote.
     points_weight: the decision ranks the refined fits by ``chamfer_px + points_weight * points_res``
         (:class:`OutlineFit`; the margin is the gap in that score): the stereo points weigh in where
@@ -156,6 +161,7 @@ class SilhouetteConfig:
     polish_max_deg: float = 15.0
     polish_max_m: float = 1.0
     track_needs_outline: int = 0
+    track_max_chamfer_px: float = 0.0
     points_weight: float = 0.0
     rival_deg: float = 90.0
     search_candidates: int = 0
@@ -176,7 +182,8 @@ class SilhouetteConfig:
             raise ValueError(f"invalid silhouette config {self}")
         if (self.image_vote not in (0, 1) or self.image_exclusion_px < 0 or self.image_min_pixels < 0
                 or self.min_flip_pixels < 0
-                or not 0 <= self.image_max_background <= 1 or not self.image_max_chamfer_px >= 0):
+                or not 0 <= self.image_max_background <= 1 or not self.image_max_chamfer_px >= 0
+                or not self.track_max_chamfer_px >= 0):
             raise ValueError(f"invalid silhouette config {self}")
         if (self.polish not in (0, 1) or self.track_needs_outline not in (0, 1)
                 or not 0.0 <= self.polish_range_weight <= 1.0
