@@ -4,8 +4,8 @@ The evaluation sets are rendered again on each session's machine, and session 29
 changing their validity between machines without knowing whether the renderer or onnxruntime moved.
 These frames were rendered once and stored (``data/render_golden.npz``); on any machine the renderer must
 give them back: the poses exactly (they come from the generator alone), the images and masks up to the
-edge pixels a ray caster built for another instruction set may flip. The test reports (logs) whether the
-frames came back bit for bit.
+edge pixels a ray caster built for another instruction set may flip. Whether they came back bit for bit
+shows in the summary line: ``test_bit_identical`` is an expected failure that passes (xpassed) when they did.
 
 Regenerate the file only for an intended change of the renderer::
 
@@ -91,6 +91,14 @@ def test_images_match(frames, k):
         assert diff.mean() < 0.5, f"{view}{k}: mean |difference| {diff.mean():.3f} DN"
         assert (diff.max(axis=-1) > 8).mean() <= 0.01, f"{view}{k}: {(diff.max(axis=-1) > 8).mean():.2%} pixels off"
     log.info("golden frame %d: images %s", k, "bit-identical" if exact else "within tolerance, not bit-identical")
+
+
+@pytest.mark.xfail(strict=False, reason="a ray caster built for another instruction set may flip edge pixels; "
+                   "the summary's xpassed / xfailed count tells whether this machine renders bit for bit")
+def test_bit_identical(frames):
+    stored, now = frames
+    for key, value in stored.items():
+        np.testing.assert_array_equal(now[key], value, err_msg=key)
 
 
 @pytest.mark.parametrize("k", range(len(REGIMES)))
