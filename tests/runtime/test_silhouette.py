@@ -649,6 +649,49 @@ def test_track_needs_outline_refuses_a_tracked_pose_no_outline_fit_confirms(tmp_
         assert res.tracked and rotation_angle_deg(res.R, nudged) > 0.1
 
 
+@pytest.mark.parametrize("track_gate, tracked", [(0.0, False), (2.0, False), (3.0, True)])
+def test_track_max_chamfer_px_loosens_only_the_tracking_routes_gate(tmp_path, monkeypatch, track_gate, tracked):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.silhouette import OutlineDecision, OutlineFit
+
+    left, right = synthetic_pair()
+    first = _estimator(tmp_path / "l", {"min_margin": 0.99}, {"max_chamfer_px": 100.0, "min_margin_px": 0.0}
+                       ).estimate(left, right)
+    assert first.valid
+    gates = {"max_chamfer_px": 1.0, "min_margin_px": 5.0, "track_needs_outline": 1,
+             "track_max_chamfer_px": track_gate}
+    est = _estimator(tmp_path / "t", {"min_margin": 0.99}, gates)
+    assert est.bundle.silhouette.track_max_chamfer_px == track_gate
+    est._roi_hint = lambda: None
+    nudged = Rotation.from_euler("x", 2.0, degrees=True).as_matrix() @ first.R
+    far = flipped_pose(first.R, first.t, est.bundle.centre, "z")
+
+    def refined(candidates, *args, **kwargs):   # the fit near the prior at 2.5 px: outside 1 and 2, inside 3
+        return OutlineDecision(best=OutlineFit(far[0], far[1], 2.4), other=OutlineFit(nudged, first.t, 2.5),
+                               best_index=0, margin_px=0.1, turned_deg=178.0)
+
+    monkeypatch.setattr(estimator_module, "decide_outline", refined)
+    est._prior = first
+    res = est.estimate(left, right)
+    assert res.valid == tracked
+    if tracked:    # the fit near the prior, never the better-fitting flip
+        assert res.tracked and rotation_angle_deg(res.R, nudged) < 1e-9
+    else:
+        assert res.status == "weak_votes" and "near the previous pose" in res.detail
+    # without a prior the looser gate decides nothing
+    est.reset()
+    res = est.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes"
+
+
+@pytest.mark.parametrize("bad", [-0.5, float("nan")])
+def test_track_max_chamfer_px_must_not_be_negative(bad):
+    with pytest.raises(ValueError):
+        SilhouetteConfig(track_max_chamfer_px=bad)
+    assert SilhouetteConfig().track_max_chamfer_px == 0.0
+
+
 def test_track_needs_outline_is_a_flag():
     with pytest.raises(ValueError):
         SilhouetteConfig(track_needs_outline=2)
