@@ -55,6 +55,7 @@ from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
 from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
 from .silhouette import align_centroid, decide_outline, polish_pose
+from .tails import nees_gate
 from .uncertainty import PoseUncertainty, pose_uncertainty, position_uncertainty
 
 __all__ = ["PoseResult", "PoseEstimator", "DECISION_ROUTES", "rotation_to_quaternion", "pose_crop_window",
@@ -437,6 +438,15 @@ class PoseEstimator:
         self.position_window = bool(position_window)
         self.prior_window = bool(prior_window)
         self._last_position: tuple[np.ndarray, float] | None = None   # the last frame's position-only result
+
+    def nees_gate(self, probability: float = 0.99) -> float:
+        """The normalised squared error a right pose's position (against ``position_cov``, 3 axes) or rotation
+        (against ``sigma_rotation_deg`` per axis, 3 axes) stays at or under with ``probability``: the gate a
+        navigation filter sets to keep that share of right poses. From the bundle's ``uncertainty.tail_dof``
+        (the errors' Student-t tails, :mod:`spacepose.tails`); chi-square when it is 0 or the bundle has no
+        ``uncertainty`` section."""
+        config = self.bundle.uncertainty
+        return nees_gate(probability, 3, 0.0 if config is None else config.tail_dof)
 
     # ------------------------------------------------------------------ prior
     def reset(self) -> None:

@@ -36,7 +36,8 @@ not with the distance). Such a frame gets no covariance when its chamfer is not 
 
 The constants are fitted by :mod:`spacepose.tools.calibrate_uncertainty` on training frames, never
 by hand. The errors have heavier tails than a normal distribution: read the measured coverage in the
-model card before trusting a 3-sigma bound.
+model card before trusting a 3-sigma bound. ``tail_dof`` (optional) describes those tails as a
+Student-t law, and :func:`spacepose.tails.nees_gate` turns it into gates for a filter.
 """
 
 from __future__ import annotations
@@ -63,6 +64,9 @@ class UncertaintyConfig:
         floor (degrees).
     rotation_chamfer_deg: degrees of rotation sigma per pixel of the outline fit's chamfer (0: no such
         term; otherwise no rotation sigma is given without a finite chamfer).
+    tail_dof: the degrees of freedom of the Student-t law the errors follow, given these sigmas (> 2), or 0
+        (the default, and every bundle without the key): normal. It sets the NEES gates
+        (:func:`spacepose.tails.nees_gate`), not the sigmas.
     """
 
     range_k: float
@@ -71,6 +75,7 @@ class UncertaintyConfig:
     rotation_k_deg: float
     rotation_floor_deg: float
     rotation_chamfer_deg: float = 0.0
+    tail_dof: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -83,6 +88,8 @@ class UncertaintyConfig:
             raise ValueError("uncertainty: lateral_px and lateral_floor_m cannot both be 0 (a singular covariance)")
         if self.rotation_k_deg == 0.0 and self.rotation_floor_deg == 0.0 and self.rotation_chamfer_deg == 0.0:
             raise ValueError("uncertainty: rotation_k_deg, rotation_floor_deg and rotation_chamfer_deg cannot all be 0")
+        if not (self.tail_dof == 0.0 or self.tail_dof > 2.0):
+            raise ValueError(f"uncertainty.tail_dof must be 0 (normal) or > 2, got {self.tail_dof!r}")
 
 
 @dataclass(frozen=True)
@@ -187,7 +194,7 @@ def _line_of_sight_cov(u: np.ndarray, sigma_range: float, sigma_lateral: float) 
 
 def parse_uncertainty(section: Any) -> UncertaintyConfig | None:
     """The bundle's ``uncertainty`` section (``None`` when absent); BundleError when malformed."""
-    return parse_number_section(section, "uncertainty", UncertaintyConfig, optional=("rotation_chamfer_deg",))
+    return parse_number_section(section, "uncertainty", UncertaintyConfig, optional=("rotation_chamfer_deg", "tail_dof"))
 
 
 def parse_position_uncertainty(section: Any) -> PositionUncertaintyConfig | None:

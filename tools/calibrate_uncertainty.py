@@ -31,6 +31,11 @@ logit of the normal model's probability, from the sigmas of the bundle's ``uncer
 the bundle's ``confidence`` section predicts that event (:func:`confidence_check`: mean confidence against the
 share within, rank correlations with the errors, Brier score, quantile bins).
 
+With ``--tails`` the errors' heavy tails (:mod:`spacepose.tails`): with ``--fit``, the Student-t degrees of freedom
+``tail_dof`` (:func:`fit_tail_dof`, maximum likelihood over the right poses' position and rotation NEES against the
+bundle's sigmas); without, how the bundle's ``tail_dof`` gates them (:func:`tail_check`: the share of right and of
+wrong poses beyond the 95, 99 and 99.7 % gates, against chi-square's).
+
 Fit only on training frames; check on frames rendered after the fit.
 """
 
@@ -48,6 +53,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from spacepose.confidence import P_CLIP, ConfidenceConfig, calibrated_confidence, within_probability
+from spacepose.tails import nees_gate
 from spacepose.uncertainty import (PositionUncertaintyConfig, UncertaintyConfig, pose_uncertainty,
                                    position_uncertainty)
 
@@ -55,7 +61,8 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["NOMINAL", "pose_errors", "position_errors", "wrong_poses", "fit_uncertainty", "fit_position_uncertainty",
            "coverage", "position_coverage", "format_coverage", "format_position_coverage", "normal_within",
-           "model_sigmas", "within_tolerance", "fit_confidence", "confidence_check", "format_confidence_check", "main"]
+           "model_sigmas", "within_tolerance", "fit_confidence", "confidence_check", "format_confidence_check",
+           "nees_values", "right_nees", "fit_tail_dof", "tail_check", "format_tail_check", "GATE_PROBABILITIES", "main"]
 
 # a normal distribution's share within the sigma-equivalent bounds that ``coverage`` counts
 NOMINAL = {"range_1": 0.6827, "range_2": 0.9545, "lateral_1": 1.0 - math.exp(-0.5), "lateral_2": 1.0 - math.exp(-2.0),
@@ -63,6 +70,7 @@ NOMINAL = {"range_1": 0.6827, "range_2": 0.9545, "lateral_1": 1.0 - math.exp(-0.
 MAXWELL_MEDIAN = 1.5382  # median of the length of a 3-D standard normal vector
 WRONG_DEG, WRONG_M = 20.0, 0.5   # a "wrong" valid pose, as the project counts them
 CHI2_3DOF_997 = 14.156   # 99.73 % quantile of a chi-square with 3 degrees of freedom (a "3-sigma" gate)
+GATE_PROBABILITIES = (0.95, 0.99, 0.997)   # the gates tail_check counts
 
 
 def _read(path: Path) -> dict[str, Any]:
@@ -353,6 +361,82 @@ def format_position_coverage(name: str, cov: dict[str, float]) -> str:
             f"{cov['spearman_position']:.2f}")
 
 
+def nees_values(err: dict[str, np.ndarray], config: UncertaintyConfig, focal_px: float | None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(d2_position, d2_rotation, right)`` over the poses with finite sigmas of ``config``: the position's NEES
+    against its covariance (range and cross-range, 3 axes), the rotation's against ``sigma_rot`` per axis (3
+    axes), and which poses are not wrong (:func:`wrong_poses`)."""
+    sig = model_sigmas(err, config, focal_px)
+    keep = np.all(np.isfinite(sig), axis=1)
+    s_r, s_l, s_R = sig[keep].T
+    d2_position = (err["range"][keep] / s_r) ** 2 + (err["lateral"][keep] / s_l) ** 2
+    d2_rotation = (err["e_R"][keep] / s_R) ** 2
+    right = ~wrong_poses({k: v[keep] for k, v in err.items()})
+    return d2_position, d2_rotation, right
+
+
+def fit_tail_dof(d2: np.ndarray, bounds: tuple[float, float] = (2.05, 200.0)) -> float:
+    """The Student-t degrees of freedom (:mod:`spacepose.tails`) that maximise the likelihood of the 3-axis NEES
+    values ``d2`` (the right poses' position and rotation NEES of :func:`nees_values`, pooled), within ``bounds``.
+    ValueError with fewer than 20 finite values."""
+    from scipy import optimize, stats
+
+    d2 = np.asarray(d2, dtype=np.float64)
+    d2 = d2[np.isfinite(d2)]
+    if len(d2) < 20:
+        raise ValueError(f"need at least 20 NEES values to fit the tails, got {len(d2)}")
+    d2 = np.maximum(d2, 1e-12)
+
+    def nll(nu: float) -> float:
+        c = nu / ((nu - 2.0) * 3.0)   # d2 * c ~ F(3, nu)
+        return -float(np.sum(stats.f.logpdf(d2 * c, 3, nu) + math.log(c)))
+
+    res = optimize.minimize_scalar(nll, bounds=bounds, method="bounded", options={"xatol": 1e-4})
+    return float(res.x)
+
+
+def right_nees(per_report: Iterable[tuple[dict[str, np.ndarray], float]], config: UncertaintyConfig) -> np.ndarray:
+    """The right poses' position and rotation NEES (:func:`nees_values`) of every ``(err, focal_px)``, pooled."""
+    parts = []
+    for err, focal in per_report:
+        d2_position, d2_rotation, right = nees_values(err, config, focal)
+        parts += [d2_position[right], d2_rotation[right]]
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def tail_check(err: dict[str, np.ndarray], config: UncertaintyConfig, focal_px: float | None,
+               tail_dof: float) -> dict[str, Any]:
+    """The gates of ``tail_dof`` (and chi-square's, ``tail_dof`` 0) at :data:`GATE_PROBABILITIES`: per gate the
+    share of right poses whose position / rotation NEES is beyond it and the share of wrong poses beyond either."""
+    d2_position, d2_rotation, right = nees_values(err, config, focal_px)
+    out: dict[str, Any] = {"poses": int(len(right)), "right": int(right.sum()), "wrong": int((~right).sum()),
+                           "tail_dof": float(tail_dof), "gates": {}}
+    for model, nu in (("t", tail_dof), ("chi2", 0.0)):
+        for p in GATE_PROBABILITIES:
+            gate = nees_gate(p, 3, nu)
+            pos, rot = d2_position > gate, d2_rotation > gate
+            out["gates"][f"{model}_{p}"] = {
+                "gate": gate,
+                "right_position": float(np.mean(pos[right])) if right.any() else float("nan"),
+                "right_rotation": float(np.mean(rot[right])) if right.any() else float("nan"),
+                "wrong_either": float(np.mean((pos | rot)[~right])) if (~right).any() else float("nan")}
+    return out
+
+
+def format_tail_check(name: str, check: dict[str, Any]) -> str:
+    """One line per gate model: the gates and the shares beyond them (right position / right rotation / wrong)."""
+    lines = [f"{name}: {check['right']} right and {check['wrong']} wrong poses; beyond the gate, right position / "
+             f"right rotation / wrong (either):"]
+    for model, label in (("t", f"t, dof {check['tail_dof']:.2f}"), ("chi2", "chi-square")):
+        cells = []
+        for p in GATE_PROBABILITIES:
+            g = check["gates"][f"{model}_{p}"]
+            cells.append(f"{100 * p:g}% gate {g['gate']:.1f}: {100 * g['right_position']:.1f}% / "
+                         f"{100 * g['right_rotation']:.1f}% / {100 * g['wrong_either']:.0f}%")
+        lines.append(f"  {label:<14}" + " | ".join(cells))
+    return "\n".join(lines)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m spacepose.tools.calibrate_uncertainty", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -361,6 +445,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     what = parser.add_mutually_exclusive_group()
     what.add_argument("--positions", action="store_true",
                       help="the frames with a position but no pose (the position_uncertainty section)")
+    what.add_argument("--tails", action="store_true",
+                      help="the errors' heavy tails: the uncertainty section's tail_dof (fit with --fit) and its gates")
     what.add_argument("--confidence", action="store_true",
                       help="the confidence of valid poses from their uncertainty (the confidence section; the "
                            "bundle's uncertainty section gives the sigmas)")
@@ -383,12 +469,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     out: dict[str, Any] = {"reports": [p for p, _, _ in per_report]}
     if args.confidence:
         return _confidence_main(parser, args, per_report, out)
+    if args.tails:
+        return _tails_main(parser, args, per_report, out)
     section = "position_uncertainty" if args.positions else "uncertainty"
     config: UncertaintyConfig | PositionUncertaintyConfig | None
     if args.fit:
         pooled = {k: np.concatenate([e[k] for _, e, _ in per_report]) for k in per_report[0][1]}
         config = fit_position_uncertainty(pooled) if args.positions else fit_uncertainty(pooled)
-        out["fit"] = asdict(config)
+        out["fit"] = {k: v for k, v in asdict(config).items() if k != "tail_dof"}   # --tails fits it
         print(json.dumps({section: out["fit"]}, indent=1))
     else:
         config = getattr(_load(args.bundle), section)
@@ -451,6 +539,30 @@ def _confidence_main(parser: argparse.ArgumentParser, args: argparse.Namespace,
         conf = np.array([calibrated_confidence(v, config) if math.isfinite(v) else np.nan for v in p_i])
         out["check"][path] = confidence_check(conf, w_i, err["e_t"], err["e_R"])
         print(format_confidence_check(path, out["check"][path]))
+    _write(args.json, out)
+    return 0
+
+
+def _tails_main(parser: argparse.ArgumentParser, args: argparse.Namespace,
+                per_report: list[tuple[str, dict[str, np.ndarray], float]], out: dict[str, Any]) -> int:
+    """``--tails``: fit ``tail_dof`` on the reports (``--fit``) against the bundle's sigmas, or check its gates."""
+    model = _load(args.bundle)
+    if model.uncertainty is None:
+        parser.error("the bundle has no uncertainty section: the tails are those of its sigmas")
+    tail_dof = model.uncertainty.tail_dof
+    if args.fit:
+        try:
+            tail_dof = fit_tail_dof(right_nees([(e, f) for _, e, f in per_report], model.uncertainty))
+        except ValueError as err:
+            parser.error(f"cannot fit the tails on these reports: {err}")
+        out["fit"] = {"tail_dof": round(tail_dof, 4)}
+        print(json.dumps({"uncertainty": out["fit"]}, indent=1))
+    elif tail_dof == 0.0:
+        logger.info("the bundle's uncertainty section has no tail_dof: its gates are chi-square's")
+    out["check"] = {}
+    for path, err, focal in per_report:
+        out["check"][path] = tail_check(err, model.uncertainty, focal, tail_dof)
+        print(format_tail_check(path, out["check"][path]))
     _write(args.json, out)
     return 0
 

@@ -76,6 +76,9 @@ def test_the_position_must_be_a_3_vector():
     ({"lateral_px": 0.0, "lateral_floor_m": 0.0}, "singular"),
     ({"rotation_k_deg": 0.0, "rotation_floor_deg": 0.0, "rotation_chamfer_deg": 0.0}, "cannot all be 0"),
     ({"rotation_chamfer_deg": -0.1}, "rotation_chamfer_deg must be finite and >= 0"),
+    ({"tail_dof": 2.0}, "tail_dof must be 0"),
+    ({"tail_dof": 1.0}, "tail_dof must be 0"),
+    ({"tail_dof": float("inf")}, "tail_dof must be finite"),
 ])
 def test_bad_constants_are_refused(changes, match):
     with pytest.raises(ValueError, match=match):
@@ -102,6 +105,21 @@ def test_an_absent_section_is_none():
     assert parse_uncertainty(dict(SECTION)) == CONFIG
     without = {k: v for k, v in SECTION.items() if k != "rotation_chamfer_deg"}   # optional: no chamfer term
     assert parse_uncertainty(without).rotation_chamfer_deg == 0.0
+    assert parse_uncertainty(dict(SECTION)).tail_dof == 0.0                      # optional: normal tails
+    assert parse_uncertainty({**SECTION, "tail_dof": 3.5}).tail_dof == 3.5
+
+
+def test_the_estimator_gives_the_gates_of_its_bundles_tails(tmp_path, monkeypatch):
+    from spacepose.tails import nees_gate
+
+    normal = _estimator(tmp_path / "n", monkeypatch, SECTION)
+    assert normal.nees_gate(0.99) == pytest.approx(11.3449, abs=1e-4)          # chi-square, 3 axes
+    heavy = _estimator(tmp_path / "t", monkeypatch, {**SECTION, "tail_dof": 3.6})
+    assert heavy.nees_gate(0.99) == pytest.approx(nees_gate(0.99, 3, 3.6))
+    assert heavy.nees_gate(0.99) > 2.0 * normal.nees_gate(0.99)
+    assert _estimator(tmp_path / "none", monkeypatch, None).nees_gate(0.95) == pytest.approx(7.8147, abs=1e-4)
+    with pytest.raises(ValueError):
+        heavy.nees_gate(1.0)
 
 
 def test_the_rotation_sigma_grows_with_the_outline_chamfer_and_needs_it():

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from spacepose.confidence import ConfidenceConfig, calibrated_confidence
-from spacepose.tools.calibrate_uncertainty import (NOMINAL, confidence_check, coverage, fit_confidence,
-                                                   fit_position_uncertainty, fit_uncertainty, main, normal_within,
-                                                   pose_errors, position_coverage, position_errors, within_tolerance,
-                                                   wrong_poses)
+from spacepose.tools.calibrate_uncertainty import (GATE_PROBABILITIES, NOMINAL, confidence_check, coverage,
+                                                   fit_confidence, fit_position_uncertainty, fit_tail_dof,
+                                                   fit_uncertainty, format_tail_check, main, nees_values,
+                                                   normal_within, pose_errors, position_coverage, position_errors,
+                                                   right_nees, tail_check, within_tolerance, wrong_poses)
 from spacepose.uncertainty import PositionUncertaintyConfig, UncertaintyConfig, pose_uncertainty, position_uncertainty
 
 TRUE = UncertaintyConfig(range_k=0.2, lateral_px=1.0, lateral_floor_m=0.02, rotation_k_deg=40.0, rotation_floor_deg=0.8,
@@ -314,3 +315,60 @@ def test_the_command_fits_and_checks_the_confidence(tmp_path, capsys):
     few.write_text(json.dumps({"focal_px": FOCAL, "frames": _rows(shipped, n=10)}))
     with pytest.raises(SystemExit):
         main([str(few), "--confidence", "--fit"])
+
+
+def _multivariate_t_nees(nu, n, seed):
+    """3-axis NEES values of Student-t errors with ``nu`` degrees of freedom and the covariance they are
+    normalised by."""
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal((n, 3)) * np.sqrt((nu - 2.0) / rng.chisquare(nu, (n, 1)))
+    return np.sum(x ** 2, axis=1)
+
+
+@pytest.mark.parametrize("nu", [3.0, 4.0, 8.0])
+def test_the_tail_fit_recovers_the_degrees_of_freedom(nu):
+    assert fit_tail_dof(_multivariate_t_nees(nu, 20_000, seed=int(nu))) == pytest.approx(nu, rel=0.1)
+
+
+def test_normal_errors_fit_many_degrees_of_freedom_and_few_values_are_refused():
+    assert fit_tail_dof(np.random.default_rng(0).chisquare(3, 20_000)) > 50.0
+    with pytest.raises(ValueError):
+        fit_tail_dof(np.ones(10))
+
+
+def test_the_tail_check_counts_right_and_wrong_poses_beyond_each_gate():
+    rows = _rows(TRUE, n=3000, seed=4, tails=3.0)
+    err = pose_errors(rows, FOCAL)
+    check = tail_check(err, TRUE, FOCAL, 3.0)
+    assert check["right"] + check["wrong"] == check["poses"] == 3000
+    for p in GATE_PROBABILITIES:
+        t, chi2 = check["gates"][f"t_{p}"], check["gates"][f"chi2_{p}"]
+        assert t["gate"] > chi2["gate"]
+        assert t["right_position"] <= chi2["right_position"] and t["right_rotation"] <= chi2["right_rotation"]
+    # heavy-tailed errors: chi-square's 99 % gate throws away several times 1 % of the right poses
+    assert check["gates"]["chi2_0.99"]["right_position"] > 0.02
+    d2_position, d2_rotation, right = nees_values(err, TRUE, FOCAL)
+    assert len(d2_position) == len(d2_rotation) == len(right) == 3000
+    assert len(right_nees([(err, FOCAL)], TRUE)) == 2 * int(right.sum())
+    assert "chi-square" in format_tail_check("set", check)
+
+
+def test_the_command_fits_and_checks_the_tails(tmp_path, capsys):
+    from spacepose.bundle import load_bundle
+
+    shipped = load_bundle(None, verify_graphs=False).uncertainty
+    report = tmp_path / "pose_eval.json"
+    report.write_text(json.dumps({"focal_px": FOCAL, "frames": _rows(shipped, n=1500, tails=4.0)}))
+    out = tmp_path / "tails.json"
+    assert main([str(report), "--tails", "--fit", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert 2.0 < data["fit"]["tail_dof"] < 200.0
+    assert data["check"][str(report)]["tail_dof"] == pytest.approx(data["fit"]["tail_dof"], abs=1e-3)
+    assert '"tail_dof"' in capsys.readouterr().out
+    assert main([str(report), "--tails"]) == 0          # the bundle's own tail_dof
+    with pytest.raises(SystemExit):
+        main([str(report), "--tails", "--confidence"])   # one of the two
+    few = tmp_path / "few.json"
+    few.write_text(json.dumps({"focal_px": FOCAL, "frames": _rows(shipped, n=5)}))
+    with pytest.raises(SystemExit):
+        main([str(few), "--tails", "--fit"])
