@@ -295,3 +295,10 @@ def test_a_position_only_frame_carries_its_covariance_into_the_json_line(tmp_pat
     assert pose_only.position_valid and np.all(np.isnan(pose_only.position_cov))
     _, off = estimate("off", {})
     assert off.position_valid and off.to_dict()["position_cov"] is None
+
+
+def test_the_shipped_bundle_models_heavy_tails():
+    """Session 31 (reports/tails_s31/rule.txt): the shipped sigmas' errors are Student-t with about 3.6 degrees
+    of freedom, so the 99 % gate is more than twice chi-square's."""
+    shipped = load_bundle(None, verify_graphs=False).uncertainty
+    assert shipped is not None and 2.0 < shipped.tail_dof < 10.0
