@@ -24,6 +24,7 @@ __all__ = ["nees_cdf", "nees_gate"]
 
 _EPS = 1e-14
 _MAX_TERMS = 500
+_TINY = 1e-300
 
 
 def _gamma_p(a: float, x: float) -> float:
@@ -44,21 +45,24 @@ def _gamma_p(a: float, x: float) -> float:
     return max(0.0, 1.0 - _continued_fraction_q(a, x) * math.exp(log_front))
 
 
+def _lentz(d: float, c: float, a: float, b: float) -> tuple[float, float, float]:
+    """One step of Lentz's method for the term ``a / (b + ...)``: the new ``d``, ``c`` and the factor."""
+    d = b + a * d
+    d = _TINY if abs(d) < _TINY else d
+    c = b + a / c
+    c = _TINY if abs(c) < _TINY else c
+    d = 1.0 / d
+    return d, c, d * c
+
+
 def _continued_fraction_q(a: float, x: float) -> float:
     """Lentz's continued fraction of Q(a, x) without its front factor."""
-    tiny = 1e-300
     b = x + 1.0 - a
-    c, d = 1.0 / tiny, 1.0 / b
+    c, d = 1.0 / _TINY, 1.0 / b
     h = d
     for i in range(1, _MAX_TERMS):
-        an = -i * (i - a)
         b += 2.0
-        d = an * d + b
-        d = tiny if abs(d) < tiny else d
-        c = b + an / c
-        c = tiny if abs(c) < tiny else c
-        d = 1.0 / d
-        delta = d * c
+        d, c, delta = _lentz(d, c, -i * (i - a), b)
         h *= delta
         if abs(delta - 1.0) < _EPS:
             break
@@ -79,29 +83,14 @@ def _beta_i(a: float, b: float, x: float) -> float:
 
 def _beta_cf(a: float, b: float, x: float) -> float:
     """Lentz's continued fraction of the incomplete beta function."""
-    tiny = 1e-300
     qab, qap, qam = a + b, a + 1.0, a - 1.0
-    c, d = 1.0, 1.0 - qab * x / qap
-    d = tiny if abs(d) < tiny else d
-    d = 1.0 / d
-    h = d
+    d = _lentz(1.0, 1.0, -qab * x / qap, 1.0)[0]   # the leading 1 / (1 - qab x / qap)
+    c, h = 1.0, d
     for m in range(1, _MAX_TERMS):
         m2 = 2 * m
-        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
-        d = 1.0 + aa * d
-        d = tiny if abs(d) < tiny else d
-        c = 1.0 + aa / c
-        c = tiny if abs(c) < tiny else c
-        d = 1.0 / d
-        h *= d * c
-        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
-        d = 1.0 + aa * d
-        d = tiny if abs(d) < tiny else d
-        c = 1.0 + aa / c
-        c = tiny if abs(c) < tiny else c
-        d = 1.0 / d
-        delta = d * c
-        h *= delta
+        d, c, even = _lentz(d, c, m * (b - m) * x / ((qam + m2) * (a + m2)), 1.0)
+        d, c, delta = _lentz(d, c, -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2)), 1.0)
+        h *= even * delta
         if abs(delta - 1.0) < _EPS:
             break
     return h
