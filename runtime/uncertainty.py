@@ -194,7 +194,8 @@ def _line_of_sight_cov(u: np.ndarray, sigma_range: float, sigma_lateral: float) 
 
 def parse_uncertainty(section: Any) -> UncertaintyConfig | None:
     """The bundle's ``uncertainty`` section (``None`` when absent); BundleError when malformed."""
-    return parse_number_section(section, "uncertainty", UncertaintyConfig, optional=("rotation_chamfer_deg", "tail_dof"))
+    return parse_number_section(section, "uncertainty", UncertaintyConfig,
+                                optional=("rotation_chamfer_deg", "tail_dof"))
 
 
 def parse_position_uncertainty(section: Any) -> PositionUncertaintyConfig | None:
