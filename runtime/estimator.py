@@ -775,26 +775,41 @@ class PoseEstimator:
             return _stage_invalid(stage, "weak_votes", {**factors, "prior_conflict": 1.0}), (
                 f"the pose is {turned:.0f}° from the previous valid pose")
         decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer)
-        if factors.get("flip_decided") and (cap := bundle.flip_classifier.max_polish_deg) > 0.0:
-            moved = factors.get("polish_deg", float("nan")) if decided is not None else float("nan")
-            if not moved <= cap:   # NaN (no polish, or one not used) refuses too
-                refusal = (f"the flip classifier decided the pose, but the polish turned it {moved:.1f}° "
-                           f"(more than {cap:.1f}°, or it did not run)")
-                # a refused decision is no decision: the previous pose may still pick one, as without the classifier
-                track = self._track(reg, prior, outline, margin) if prior is not None else ""
-                if isinstance(track, str):
-                    return _stage_invalid(stage, "weak_votes", factors), refusal + (f"; {track}" if track else "")
-                for key in ("flip_decided", "polish_deg", "polish_m"):
-                    factors.pop(key, None)
-                (R, t), fallback = track
-                confidence = 0.5 * reg.inlier_fraction
-                factors.update(tracked=1.0, route=_route_code("tracked"))
-                decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer)
+        if refusal := self._polish_refusal(factors, decided):
+            # a refused decision is no decision: the previous pose may still pick one, as without the classifier
+            track = self._track(reg, prior, outline, margin) if prior is not None else ""
+            if isinstance(track, str):
+                return _stage_invalid(stage, "weak_votes", factors), refusal + (f"; {track}" if track else "")
+            for key in ("flip_decided", "polish_deg", "polish_m"):
+                factors.pop(key, None)
+            (R, t), fallback = track
+            confidence = 0.5 * reg.inlier_fraction
+            factors.update(tracked=1.0, route=_route_code("tracked"))
+            decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer)
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),
                                    bandwidth=bandwidth, n_inliers=n_inliers, factors={**stage.factors, **factors},
                                    fallback=fallback, decided=decided), ""
+
+    def _polish_refusal(self, factors: dict[str, float], decided: tuple[np.ndarray, np.ndarray] | None) -> str:
+        """Why the polish refuses the pose just decided ("" when it does not): a flip-classifier decision needs a
+        polish within ``flip_classifier.max_polish_deg`` (a polish that did not run, or was not used, refuses
+        too); a decision of the outline, image or registration route one within
+        ``silhouette.max_decided_polish_deg`` when that is set (a polish that did not run does not refuse)."""
+        moved = factors.get("polish_deg", float("nan")) if decided is not None else float("nan")
+        if factors.get("flip_decided"):
+            cap = self.bundle.flip_classifier.max_polish_deg
+            if cap > 0.0 and not moved <= cap:
+                return (f"the flip classifier decided the pose, but the polish turned it {moved:.1f}° "
+                        f"(more than {cap:.1f}°, or it did not run)")
+            return ""
+        sil, route = self.bundle.silhouette, _route_name(factors)
+        cap = 0.0 if sil is None else sil.max_decided_polish_deg
+        if cap > 0.0 and route in ("outline", "image", "registration") and moved > cap:
+            return (f"the {route} route decided the pose, but the polish turned it {moved:.1f}° (more than "
+                    f"{cap:.1f}°: session 31, such turns mark poses far off)")
+        return ""
 
     def _track(self, reg: Any, prior: tuple[np.ndarray, np.ndarray] | None, outline: Any,
                margin: float) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray] | None] | str:

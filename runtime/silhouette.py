@@ -104,6 +104,11 @@ class SilhouetteConfig:
         is a little too large); the polish weighs the two.
     polish_max_deg, polish_max_m: a polish that moves the pose farther than either is not used (the
         decided pose is reported): it refines, it must not turn the pose into another one.
+    max_decided_polish_deg: a pose the outline, image or registration route decided is refused (``weak_votes``;
+        in a sequence the previous pose may still decide the frame) when the polish turns it by more than this
+        many degrees, as ``flip_classifier.max_polish_deg`` refuses the classifier's: on session 22's fresh frames
+        the poses more than 10° off were turned further (reports/wrong_s31). 0 (the default, and every bundle
+        without the key): never.
     track_needs_outline: 1 reports a tracked pose (the previous pose decides between the pose and its
         flip) only when it is one of the outline-refined fits, within ``max_chamfer_px`` and near the
         previous pose; the registered pose alone is then neither reported nor kept to fall back on. On the
@@ -160,6 +165,7 @@ class SilhouetteConfig:
     polish_range_weight: float = 0.25
     polish_max_deg: float = 15.0
     polish_max_m: float = 1.0
+    max_decided_polish_deg: float = 0.0
     track_needs_outline: int = 0
     track_max_chamfer_px: float = 0.0
     points_weight: float = 0.0
@@ -187,7 +193,8 @@ class SilhouetteConfig:
             raise ValueError(f"invalid silhouette config {self}")
         if (self.polish not in (0, 1) or self.track_needs_outline not in (0, 1)
                 or not 0.0 <= self.polish_range_weight <= 1.0
-                or not self.polish_max_deg > 0 or not self.polish_max_m > 0):
+                or not self.polish_max_deg > 0 or not self.polish_max_m > 0
+                or not self.max_decided_polish_deg >= 0):
             raise ValueError(f"invalid silhouette config {self}")
         if not (self.points_weight >= 0 and 0 < self.rival_deg < 180):
             raise ValueError(f"invalid silhouette config {self}")

@@ -273,6 +273,72 @@ def test_a_refused_classifier_decision_leaves_the_frame_to_the_previous_pose(tmp
     assert not res.valid and res.status == "weak_votes" and "polish" in res.detail
 
 
+@pytest.mark.parametrize("cap, margin, turn, polished, valid", [
+    (3.0, 0.8, 2.0, True, True),      # the outline decides, the polish turns it 2°: kept (cap 3°)
+    (3.0, 0.8, 4.0, True, False),     # ... 4°: refused
+    (3.0, 0.8, 0.0, False, True),     # ... the polish not used: kept (unlike the classifier's cap)
+    (0.0, 0.8, 4.0, True, True),      # no cap (the default): kept
+    (3.0, 0.3, 2.5, True, False),     # the classifier decides: its own 2° cap, not the outline's 3°
+])
+def test_a_decided_pose_the_polish_turns_far_is_refused(tmp_path, monkeypatch, cap, margin, turn, polished, valid):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.registration import exp_so3
+    from spacepose.silhouette import OutlineFit
+
+    left, right = synthetic_pair()
+    est = _flip_estimator(tmp_path, monkeypatch, 0.95, silhouette={"polish": 1, "max_decided_polish_deg": cap},
+                          max_polish_deg=2.0)
+    assert est.bundle.silhouette.max_decided_polish_deg == cap
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 0.5 if margin > 0.5 else 1.2, margin))
+    turned = exp_so3(np.array([np.radians(turn), 0.0, 0.0]))
+
+    def polish(outline, R, t, *args, **kwargs):
+        return OutlineFit(turned @ R, np.asarray(t), 0.5) if polished else None
+
+    monkeypatch.setattr(estimator_module, "polish_pose", polish)
+    res = est.estimate(left, right)
+    assert res.valid == valid, res.detail
+    if not valid:
+        assert res.status == "weak_votes" and "polish turned it" in res.detail
+        assert ("flip classifier" in res.detail) == (margin < 0.5)
+
+
+def test_a_refused_outline_decision_leaves_the_frame_to_the_previous_pose(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.registration import exp_so3, rotation_angle_deg
+    from spacepose.silhouette import OutlineFit
+
+    left, right = synthetic_pair()
+    est = _flip_estimator(tmp_path, monkeypatch, 0.5, silhouette={"polish": 1, "max_decided_polish_deg": 3.0})
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 0.5, 0.8))
+    turn = {"deg": 1.0}
+
+    def polish(outline, R, t, *args, **kwargs):
+        return OutlineFit(exp_so3(np.array([np.radians(turn["deg"]), 0.0, 0.0])) @ R, np.asarray(t), 0.5)
+
+    monkeypatch.setattr(estimator_module, "polish_pose", polish)
+    est._roi_hint = lambda: None
+    first = est.estimate(left, right)
+    assert first.valid and first.decided_by == "outline" and not first.tracked
+    turn["deg"] = 4.0                      # the cap refuses the outline's pose ...
+    res = est.estimate(left, right)        # ... and the previous pose picks it instead
+    assert res.valid and res.tracked and res.decided_by == "tracked", res.detail
+    assert rotation_angle_deg(res.R, first.R) < 6.0
+    est.reset()                            # without a previous pose the refusal stands
+    res = est.estimate(left, right)
+    assert not res.valid and res.status == "weak_votes" and "outline route" in res.detail
+
+
+def test_the_decided_polish_cap_must_not_be_negative():
+    from spacepose.silhouette import SilhouetteConfig
+
+    with pytest.raises(ValueError):
+        SilhouetteConfig(max_decided_polish_deg=-1.0)
+    assert SilhouetteConfig().max_decided_polish_deg == 0.0
+
+
 def test_a_classifier_decision_on_coarse_depth_is_refused(tmp_path, monkeypatch):
     import spacepose.estimator as estimator_module
     from _bundle_fixtures import synthetic_pair
