@@ -462,3 +462,11 @@ def test_a_registration_decision_needs_the_classifier(tmp_path, monkeypatch, pro
     else:
         assert res.status == "weak_votes" and "flip classifier gives it" in res.detail
         assert ("no probability" in res.detail) == no_view
+
+
+def test_the_shipped_bundle_caps_the_polish_of_decided_poses():
+    """Session 31 (reports/wrong_s31/rule.txt): 3° for the outline, image and registration routes, 2° for the
+    flip classifier's."""
+    shipped = load_bundle(None, verify_graphs=False)
+    assert shipped.silhouette.max_decided_polish_deg == 3.0
+    assert shipped.flip_classifier.max_polish_deg == 2.0
