@@ -246,15 +246,20 @@ def test_a_classifier_decision_the_polish_turns_far_is_refused(tmp_path, monkeyp
         assert res.status == "weak_votes" and "polish" in res.detail
 
 
-def test_a_refused_classifier_decision_leaves_the_frame_to_the_previous_pose(tmp_path, monkeypatch):
+@pytest.mark.parametrize("route, prob, silhouette, decision, cap, word", [
+    ("classifier", 0.95, {"polish": 1}, (1.2, 0.3), 2.0, "flip classifier"),
+    ("outline", 0.5, {"polish": 1, "max_decided_polish_deg": 3.0}, (0.5, 0.8), 3.0, "outline route"),
+])
+def test_a_refused_decision_leaves_the_frame_to_the_previous_pose(tmp_path, monkeypatch, route, prob, silhouette,
+                                                                   decision, cap, word):
     import spacepose.estimator as estimator_module
     from _bundle_fixtures import synthetic_pair
     from spacepose.registration import exp_so3, rotation_angle_deg
     from spacepose.silhouette import OutlineFit
 
     left, right = synthetic_pair()
-    est = _flip_estimator(tmp_path, monkeypatch, 0.95, silhouette={"polish": 1}, max_polish_deg=2.0)
-    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}))
+    est = _flip_estimator(tmp_path, monkeypatch, prob, silhouette=silhouette, max_polish_deg=2.0)
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, *decision))
     turn = {"deg": 1.0}
 
     def polish(outline, R, t, *args, **kwargs):
@@ -263,14 +268,14 @@ def test_a_refused_classifier_decision_leaves_the_frame_to_the_previous_pose(tmp
     monkeypatch.setattr(estimator_module, "polish_pose", polish)
     est._roi_hint = lambda: None
     first = est.estimate(left, right)
-    assert first.valid and first.decided_by == "classifier" and not first.tracked
-    turn["deg"] = 3.0                      # the cap refuses the classifier's pose ...
+    assert first.valid and first.decided_by == route and not first.tracked
+    turn["deg"] = cap + 1.0                # the cap refuses the decided pose ...
     res = est.estimate(left, right)        # ... and the previous pose picks it instead
     assert res.valid and res.tracked and res.decided_by == "tracked", res.detail
-    assert rotation_angle_deg(res.R, first.R) < 5.0 and abs(res.polish_deg - 3.0) < 1e-6
+    assert rotation_angle_deg(res.R, first.R) < cap + 3.0 and abs(res.polish_deg - turn["deg"]) < 1e-6
     est.reset()                            # without a previous pose the refusal stands
     res = est.estimate(left, right)
-    assert not res.valid and res.status == "weak_votes" and "polish" in res.detail
+    assert not res.valid and res.status == "weak_votes" and word in res.detail
 
 
 @pytest.mark.parametrize("cap, margin, turn, polished, valid", [
@@ -302,33 +307,6 @@ def test_a_decided_pose_the_polish_turns_far_is_refused(tmp_path, monkeypatch, c
     if not valid:
         assert res.status == "weak_votes" and "polish turned it" in res.detail
         assert ("flip classifier" in res.detail) == (margin < 0.5)
-
-
-def test_a_refused_outline_decision_leaves_the_frame_to_the_previous_pose(tmp_path, monkeypatch):
-    import spacepose.estimator as estimator_module
-    from _bundle_fixtures import synthetic_pair
-    from spacepose.registration import exp_so3, rotation_angle_deg
-    from spacepose.silhouette import OutlineFit
-
-    left, right = synthetic_pair()
-    est = _flip_estimator(tmp_path, monkeypatch, 0.5, silhouette={"polish": 1, "max_decided_polish_deg": 3.0})
-    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 0.5, 0.8))
-    turn = {"deg": 1.0}
-
-    def polish(outline, R, t, *args, **kwargs):
-        return OutlineFit(exp_so3(np.array([np.radians(turn["deg"]), 0.0, 0.0])) @ R, np.asarray(t), 0.5)
-
-    monkeypatch.setattr(estimator_module, "polish_pose", polish)
-    est._roi_hint = lambda: None
-    first = est.estimate(left, right)
-    assert first.valid and first.decided_by == "outline" and not first.tracked
-    turn["deg"] = 4.0                      # the cap refuses the outline's pose ...
-    res = est.estimate(left, right)        # ... and the previous pose picks it instead
-    assert res.valid and res.tracked and res.decided_by == "tracked", res.detail
-    assert rotation_angle_deg(res.R, first.R) < 6.0
-    est.reset()                            # without a previous pose the refusal stands
-    res = est.estimate(left, right)
-    assert not res.valid and res.status == "weak_votes" and "outline route" in res.detail
 
 
 def test_the_decided_polish_cap_must_not_be_negative():
