@@ -1,4 +1,4 @@
-"""Gates for the normalised squared error of a reported pose, with the errors' heavy tails (numpy only).
+"""Gates for the normalised squared error of a reported pose, with the errors' heavy tails (the standard library only).
 
 A navigation filter tests each measurement before it takes it: the normalised squared error (NEES)
 ``d2 = e^T C^-1 e`` of its innovation against a gate. With normal errors ``d2`` follows a chi-square
