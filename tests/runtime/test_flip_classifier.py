@@ -215,21 +215,28 @@ def test_the_classifier_decides_open_frames_and_vetoes_decided_ones(tmp_path, mo
         assert "flip classifier" in res.detail
 
 
-@pytest.mark.parametrize("margin, turn, polished, valid", [
-    (0.3, 1.0, True, True),      # the classifier decides, the polish turns it 1°: kept (cap 2°)
-    (0.3, 3.0, True, False),     # ... 3°: refused
-    (0.3, 0.0, False, False),    # ... the polish not used: refused
-    (0.8, 3.0, True, True),      # the outline decides: the cap is the classifier's alone
+@pytest.mark.parametrize("cap, margin, turn, polished, valid", [
+    (0.0, 0.3, 1.0, True, True),      # the classifier decides, the polish turns it 1°: kept (its cap 2°)
+    (0.0, 0.3, 3.0, True, False),     # ... 3°: refused
+    (0.0, 0.3, 0.0, False, False),    # ... the polish not used: refused
+    (0.0, 0.8, 3.0, True, True),      # the outline decides, no cap of its own (the default): kept
+    (0.0, 0.8, 4.0, True, True),      # ... 4°: kept
+    (3.0, 0.8, 2.0, True, True),      # the outline decides, the polish turns it 2°: kept (cap 3°)
+    (3.0, 0.8, 4.0, True, False),     # ... 4°: refused
+    (3.0, 0.8, 0.0, False, True),     # ... the polish not used: kept (unlike the classifier's cap)
+    (3.0, 0.3, 2.5, True, False),     # the classifier decides: its own 2° cap, not the outline's 3°
 ])
-def test_a_classifier_decision_the_polish_turns_far_is_refused(tmp_path, monkeypatch, margin, turn, polished, valid):
+def test_a_decided_pose_the_polish_turns_far_is_refused(tmp_path, monkeypatch, cap, margin, turn, polished, valid):
     import spacepose.estimator as estimator_module
     from _bundle_fixtures import synthetic_pair
     from spacepose.registration import exp_so3, rotation_angle_deg
     from spacepose.silhouette import OutlineFit
 
     left, right = synthetic_pair()
-    est = _flip_estimator(tmp_path, monkeypatch, 0.95, silhouette={"polish": 1}, max_polish_deg=2.0)
+    est = _flip_estimator(tmp_path, monkeypatch, 0.95, silhouette={"polish": 1, "max_decided_polish_deg": cap},
+                          max_polish_deg=2.0)
     assert est.bundle.flip_classifier.max_polish_deg == 2.0
+    assert est.bundle.silhouette.max_decided_polish_deg == cap
     monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 1.2 if margin < 0.5 else 0.5, margin))
     turned = exp_so3(np.array([np.radians(turn), 0.0, 0.0]))
 
@@ -241,9 +248,11 @@ def test_a_classifier_decision_the_polish_turns_far_is_refused(tmp_path, monkeyp
     assert res.valid == valid, res.detail
     if valid:
         assert res.decided_by == ("classifier" if margin < 0.5 else "outline")
-        assert abs(res.polish_deg - turn) < 1e-6 and rotation_angle_deg(res.R, res.decided[0]) > 0.5
+        if polished:
+            assert abs(res.polish_deg - turn) < 1e-6 and rotation_angle_deg(res.R, res.decided[0]) > 0.5
     else:
-        assert res.status == "weak_votes" and "polish" in res.detail
+        assert res.status == "weak_votes" and "polish turned it" in res.detail
+        assert ("flip classifier" in res.detail) == (margin < 0.5)
 
 
 @pytest.mark.parametrize("route, prob, silhouette, decision, cap, word", [
@@ -276,37 +285,6 @@ def test_a_refused_decision_leaves_the_frame_to_the_previous_pose(tmp_path, monk
     est.reset()                            # without a previous pose the refusal stands
     res = est.estimate(left, right)
     assert not res.valid and res.status == "weak_votes" and word in res.detail
-
-
-@pytest.mark.parametrize("cap, margin, turn, polished, valid", [
-    (3.0, 0.8, 2.0, True, True),      # the outline decides, the polish turns it 2°: kept (cap 3°)
-    (3.0, 0.8, 4.0, True, False),     # ... 4°: refused
-    (3.0, 0.8, 0.0, False, True),     # ... the polish not used: kept (unlike the classifier's cap)
-    (0.0, 0.8, 4.0, True, True),      # no cap (the default): kept
-    (3.0, 0.3, 2.5, True, False),     # the classifier decides: its own 2° cap, not the outline's 3°
-])
-def test_a_decided_pose_the_polish_turns_far_is_refused(tmp_path, monkeypatch, cap, margin, turn, polished, valid):
-    import spacepose.estimator as estimator_module
-    from _bundle_fixtures import synthetic_pair
-    from spacepose.registration import exp_so3
-    from spacepose.silhouette import OutlineFit
-
-    left, right = synthetic_pair()
-    est = _flip_estimator(tmp_path, monkeypatch, 0.95, silhouette={"polish": 1, "max_decided_polish_deg": cap},
-                          max_polish_deg=2.0)
-    assert est.bundle.silhouette.max_decided_polish_deg == cap
-    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 0.5 if margin > 0.5 else 1.2, margin))
-    turned = exp_so3(np.array([np.radians(turn), 0.0, 0.0]))
-
-    def polish(outline, R, t, *args, **kwargs):
-        return OutlineFit(turned @ R, np.asarray(t), 0.5) if polished else None
-
-    monkeypatch.setattr(estimator_module, "polish_pose", polish)
-    res = est.estimate(left, right)
-    assert res.valid == valid, res.detail
-    if not valid:
-        assert res.status == "weak_votes" and "polish turned it" in res.detail
-        assert ("flip classifier" in res.detail) == (margin < 0.5)
 
 
 def test_the_decided_polish_cap_must_not_be_negative():
