@@ -25,13 +25,17 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "position_s25"))
 from _rows import compact_rows  # noqa: E402
 
 from spacepose.bundle import load_bundle  # noqa: E402
-from spacepose.tools.calibrate_uncertainty import (fit_tail_dof, format_tail_check, pose_errors,  # noqa: E402
-                                                   right_nees, tail_check)
+from spacepose.confidence import calibrated_confidence  # noqa: E402
+from spacepose.tools.calibrate_uncertainty import (confidence_check, coverage, fit_tail_dof,  # noqa: E402
+                                                   format_tail_check, normal_within, pose_errors, right_nees,
+                                                   tail_check, within_tolerance)
 
 FIT_SETS = ("fit_s27f", "fit_s27g", "fit_s27x")
 SPENT_FOCAL = {"fresh1280": 1600.0, "fresh1280d": 1600.0, "unseen1280": 1600.0}
@@ -67,6 +71,16 @@ def main(argv: list[str]) -> int:
         checks[name] = tail_check(pose_errors(rows, focal), config, focal, nu)
         print(format_tail_check(f"[CHECK] {name}" if "reported" not in name else f"[reported] {name}", checks[name]))
     print("(right: not off by > 20 deg or > 0.5 m; the NEES of position and rotation each have 3 axes)")
+    # reported only: how the sigmas and the confidence fare at 1,280x960 (the model card's "The errors' tails")
+    focal = CHECK["check1280 (reported)"][1]
+    err = pose_errors(_check_rows(runs)["check1280 (reported)"], focal)
+    cov = coverage(err, config, focal)
+    conf = np.array([calibrated_confidence(p, bundle.confidence) for p in
+                     normal_within(err, config, focal, bundle.confidence)])
+    check = confidence_check(conf, within_tolerance(err, bundle.confidence), err["e_t"], err["e_R"])
+    print(f"[reported] check1280: per-axis NEES of the right poses: range {cov['nees_range']:.2f}, lateral "
+          f"{cov['nees_lateral']:.2f}, rotation {cov['nees_rotation']:.2f}; confidence {check['mean_confidence']:.3f} "
+          f"against {check['share_within']:.3f} within the bar ({check['poses']} poses)")
     g = checks["check640"]["gates"]
     fails = []
     for p, limit in ((0.99, 0.025), (0.997, 0.010), (0.95, 0.09)):
