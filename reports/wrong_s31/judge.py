@@ -16,6 +16,8 @@ bundle does exactly that on 100 frames.
 """
 from __future__ import annotations
 
+import gzip
+import json
 import sys
 from pathlib import Path
 
@@ -50,6 +52,7 @@ def stats(rows: list[dict]) -> dict[str, float]:
             "wrong": int(np.sum((e_R > 20.0) | (e_t > 0.5))), "flips": int(np.sum(e_R > 90.0)),
             "within": int(np.sum((e_t <= BAR_T_M) & (e_R <= BAR_R_DEG))),
             "e_t_mean": float(e_t.mean()) if len(v) else float("nan"),
+            "e_t_median": float(np.median(e_t)) if len(v) else float("nan"),
             "e_R_mean": float(e_R.mean()) if len(v) else float("nan"),
             "e_R_median": float(np.median(e_R)) if len(v) else float("nan")}
 
@@ -95,6 +98,14 @@ def main(argv: list[str]) -> int:
     fails += ([f"4. mean e_R {new['e_R_mean']:.3f} >= {old['e_R_mean']:.3f}"]
               if not new["e_R_mean"] < old["e_R_mean"] else [])
     fails += [f"the candidate bundle differs from the simulation on {len(differ)} frames"] if differ or not ran else []
+    print()
+    print("reported, this bundle (with the cap) on the test split and the unseen set (committed eval-pose rows):")
+    for name in ("pose_test640_s31", "pose_unseen1280_s31"):
+        with gzip.open(HERE.parent / name / "pose_eval.json.gz", "rt") as fh:
+            s = stats(json.load(fh)["frames"])
+        print(f"  {name}: {s['valid']} of {s['frames']} valid, mean {s['e_t_mean']:.3f} m / {s['e_R_mean']:.2f} deg, "
+              f"median {s['e_t_median']:.3f} m / {s['e_R_median']:.2f} deg, wrong {s['wrong']}, > 90 deg {s['flips']}, "
+              f"within the bar {s['within']}")
     print()
     print("verdict (rule.txt, tdrs640_s31w seed 3141, 1,800 frames, cap 3 deg): "
           + ("MET" if not fails else "NOT MET: " + "; ".join(fails)))
