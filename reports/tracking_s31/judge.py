@@ -17,7 +17,9 @@ recorded with each pose: its ``confidence``, ``sigma_rotation_deg``, ``sigma_ran
 """
 from __future__ import annotations
 
+import gzip
 import importlib.util
+import json
 import sys
 from pathlib import Path
 
@@ -55,6 +57,38 @@ def tracked_honesty(frames: list[dict]) -> dict[str, float]:
             "nees_position": float(np.mean(pos)) if pos else float("nan")}
 
 
+def report_spent(rows: dict[str, list[dict]]) -> None:
+    """Reported only (the figures the rule's background and the model card quote): session 30's check2 frames that
+    a looser gate might track, the poses the 2.5 px gate added by depth tolerance, and ``seq_e13``'s valid poses."""
+    with gzip.open(HERE.parent / "sequence_s30" / "rows2.json.gz", "rt") as fh:
+        s30 = json.load(fh)
+    near = 0
+    for name, *_ in s31.s30.sequences("check2"):
+        frames, last = s30[f"gap2_{name}"], -99
+        for i, r in enumerate(frames):
+            if r["valid"]:
+                last = i
+            elif i - last <= 3 and 1.5 <= r["outline_chamfer_px"] < 3.0:
+                near += 1
+    print(f"session 30's check2 sequences (gap 2): {near} frames without a pose, a valid one at most 3 frames before "
+          "and an outline best fit within 1.5-3.0 px")
+    added = [b for which in MODES for name, *_ in s31.sequences(which)
+             for a, b in zip(rows[f"base_{name}"], rows[f"gate25_{name}"])
+             if b["valid"] and b["tracked"] and not (a["valid"] and a["tracked"])]
+    print(f"tracked poses the 2.5 px gate added (fit and check): {len(added)}")
+    for label, lo, hi in (("depth tolerance <= 1.0 m", 0.0, 1.0), ("depth tolerance > 1.0 m", 1.0, np.inf)):
+        part = [r for r in added if lo < r["depth_tolerance_m"] <= hi or (lo == 0.0 and r["depth_tolerance_m"] == 0.0)]
+        wrong = sum(r["e_R"] > 20.0 or r["e_t"] > 0.5 for r in part)
+        within = sum(r["e_t"] <= BAR_T_M and r["e_R"] <= BAR_R_DEG for r in part)
+        e_R = np.mean([r["e_R"] for r in part]) if part else float("nan")
+        print(f"  {label}: {len(part)}, wrong {wrong}, within the bar {within}, mean e_R {e_R:.2f} deg")
+    print("seq_e13, the shipped bundle's valid poses (frame route e_R e_t chamfer confidence sigma_rot):")
+    for r in rows["base_seq_e13"]:
+        if r["valid"]:
+            print(f"  {r['frame']} {('tracked' if r['tracked'] else r['decided_by']):<8} {r['e_R']:5.1f} deg "
+                  f"{r['e_t']:.2f} m {r['outline_chamfer_px']:.2f} px {r['confidence']:.3f} {r['sigma_rotation_deg']:.1f} deg")
+
+
 def main(argv: list[str]) -> int:
     runs = Path(argv[0]) if argv else Path("runs/s31")
     files = {f"{mode}_{name}": [runs / f"{mode}_{name}.json"]
@@ -77,6 +111,8 @@ def main(argv: list[str]) -> int:
         print(f"  {which:<6}{LABELS[mode]:<15}{h['poses']:>5} poses | confidence {h['confidence']:.3f}, within "
               f"{h['within']:.3f} | rotation NEES per axis {h['nees_rotation']:.2f}, position e^2/trace "
               f"{h['nees_position']:.2f}")
+    print()
+    report_spent(rows)
     old, new, h = results["check", "base"], results["check", "gate25"], honesty["check", "gate25"]
     fails = []
     fails += [f"1. > 90 deg {new['flips']} > 0"] if new["flips"] > 0 else []
