@@ -33,6 +33,7 @@ from _rows import compact_rows  # noqa: E402
 
 from spacepose.bundle import load_bundle  # noqa: E402
 from spacepose.confidence import calibrated_confidence  # noqa: E402
+from spacepose.tails import nees_gate  # noqa: E402
 from spacepose.tools.calibrate_uncertainty import (confidence_check, coverage, fit_tail_dof,  # noqa: E402
                                                    format_tail_check, normal_within, pose_errors, right_nees,
                                                    tail_check, within_tolerance)
@@ -57,6 +58,9 @@ def main(argv: list[str]) -> int:
     fit_err = [(pose_errors(spent[name], 800.0), 800.0) for name in FIT_SETS]
     nu = round(fit_tail_dof(right_nees(fit_err, config)), 4)
     print(f"fit on the right poses of {', '.join(FIT_SETS)}: " + json.dumps({"uncertainty": {"tail_dof": nu}}))
+    probabilities = (0.90, 0.95, 0.99, 0.997, 0.999)
+    for label, dof in ((f"t, {nu} dof", nu), ("chi-square", 0.0)):
+        print(f"  gates ({label}): " + ", ".join(f"{100 * p:g}% {nees_gate(p, 3, dof):.2f}" for p in probabilities))
     print()
     for name, rows in spent.items():
         focal = SPENT_FOCAL.get(name, 800.0)
