@@ -568,7 +568,8 @@ def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | No
         raise BundleError("bundle.json: registration needs target.surface_points (at least 12)")
     values = _config_fields(RegistrationConfig, section, "registration", zero_ints=("seed", "position_lateral"),
                             zero_numbers=("min_margin", "min_inlier_fraction", "position_max_tau_m",
-                                          "position_max_chamfer_px"))
+                                          "position_max_chamfer_px", "position_range_bias_outline",
+                                          "position_range_bias_registered"))
     if not 0.0 <= values["min_inlier_fraction"] <= 1.0:
         raise BundleError(f"bundle.json: registration.min_inlier_fraction must be in [0, 1], "
                           f"got {values['min_inlier_fraction']!r}")
@@ -582,6 +583,9 @@ def _parse_registration(section: Any, n_surface: int) -> RegistrationConfig | No
     if values["position_max_chamfer_px"] < 0.0:
         raise BundleError(f"bundle.json: registration.position_max_chamfer_px must be >= 0 (0: off), "
                           f"got {values['position_max_chamfer_px']!r}")
+    for key in ("position_range_bias_outline", "position_range_bias_registered"):
+        if not 0.0 <= values[key] < 1.0:
+            raise BundleError(f"bundle.json: registration.{key} must be in [0, 1) (0: off), got {values[key]!r}")
     if values["position_lateral"] not in (0, 1):
         raise BundleError(f"bundle.json: registration.position_lateral must be 0 or 1, "
                           f"got {values['position_lateral']!r}")

@@ -53,7 +53,8 @@ from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
 from .pose_stage import PoseStageResult, solve_pose, surface_fitness
 from .profiler import StageTimer
-from .registration import SurfaceModel, near_prior, register, rotation_angle_deg, select_with_prior
+from .registration import (SurfaceModel, near_prior, range_debiased, register, rotation_angle_deg,
+                           select_with_prior)
 from .silhouette import align_centroid, decide_outline, polish_pose
 from .tails import nees_gate
 from .uncertainty import PoseUncertainty, pose_uncertainty, position_uncertainty
@@ -133,7 +134,9 @@ class PoseResult:
             the target about an axis through ``centre``, so both candidates put the centre at the same
             place. ``position`` is then the centre of the outline stage's best fit when that fits within
             ``silhouette.max_chamfer_px``, else of the registered pose (with ``registration.position_lateral``
-            moved parallel to the image plane so that its outline's centroid is the observed one's). A
+            moved parallel to the image plane so that its outline's centroid is the observed one's), either
+            moved nearer along its line of sight by ``registration.position_range_bias_outline`` or
+            ``..._registered`` depth tolerances (session 32: the stereo points' range bias). A
             navigation filter can use the relative position on such frames without the attitude (``valid``
             stays false: the attitude is unknown up to the flip). Only where the frame's ``depth_tolerance_m``
             is at most the bundle's ``registration.position_max_tau_m`` (0, the default: only with a valid
@@ -713,7 +716,9 @@ class PoseEstimator:
                 # the registered pose's outline moved onto the observed one (session 26)
                 shifted = align_centroid(reg.R, reg.t, self._outline_points, outline.observed, outline.frame)
                 t_c = t_c if shifted is None else shifted
-            factors.update(zip(_POSITION_KEYS, (float(v) for v in R_c @ bundle.centre + t_c)))
+            position = range_debiased(R_c @ bundle.centre + t_c, reg.tau_m, config.position_range_bias_outline
+                                      if fits else config.position_range_bias_registered)
+            factors.update(zip(_POSITION_KEYS, (float(v) for v in position)))
         flip_p = self._flip_probability(outline, stereo, left_r, timer)
         if flip_p is not None:
             factors["flip_prob"] = flip_p

@@ -73,6 +73,11 @@ class RegistrationConfig:
     position_max_chamfer_px: with ``position_max_tau_m``, such a frame also needs an outline stage whose best fit
         is within this chamfer (outline px); 0: no outline gate. A registration whose outline fits this badly
         can be wrong in range by metres where ``tau`` says under 1 m (session 26, model card).
+    position_range_bias_outline, position_range_bias_registered: such a position is moved towards the camera,
+        along its line of sight, by this many depth tolerances ``tau``, when it comes from the outline's best fit
+        and from the registered pose respectively; 0: not moved. The stereo graph reads the target's disparity
+        low by a fraction of a pixel, so the stereo points, and the ranges fitted to them, lie too far by a
+        share of ``tau`` (which scales with the depth a disparity pixel spans; session 32, model card).
     """
 
     starts: int = 48
@@ -96,6 +101,8 @@ class RegistrationConfig:
     position_max_tau_m: float = 0.0
     position_lateral: int = 0
     position_max_chamfer_px: float = 0.0
+    position_range_bias_outline: float = 0.0
+    position_range_bias_registered: float = 0.0
 
 
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
@@ -396,6 +403,20 @@ def register(points: np.ndarray, K: np.ndarray, baseline_m: float, model: Surfac
                               runner_up_angle_deg=runner_angle, runner_up_R=R_run, runner_up_t=t_run,
                               inlier_fraction=float(np.mean(dist < tau)), tau_m=float(tau), starts=len(R0),
                               n_points=len(P))
+
+
+def range_debiased(position: np.ndarray, tau_m: float, bias_tau: float) -> np.ndarray:
+    """``position`` (3,) camera frame moved towards the camera along its line of sight by ``bias_tau * tau_m``
+    metres (:class:`RegistrationConfig` ``position_range_bias_*``), never past the camera: the range ``r``
+    becomes ``max(r - bias_tau * tau_m, 0)``. Returned as a new float64 array; unchanged (a copy) when the
+    shift is 0 or not finite or the position is at the camera or not finite."""
+    check_shape(position, (3,), "position")
+    p = np.array(position, dtype=np.float64)
+    r = float(np.linalg.norm(p))
+    shift = float(bias_tau) * float(tau_m)
+    if not (math.isfinite(r) and r > 0.0 and math.isfinite(shift) and shift != 0.0):
+        return p
+    return p * (max(r - shift, 0.0) / r)
 
 
 def select_with_prior(result: RegistrationResult, R_prior: np.ndarray, t_prior: np.ndarray,
