@@ -220,6 +220,9 @@ def test_bundle_registration_section(tmp_path):
     ({"position_lateral": 2}, "position_lateral"),
     ({"position_max_chamfer_px": -1.0}, "position_max_chamfer_px"),
     ({"position_lateral": 0.5}, "position_lateral"),
+    ({"position_range_bias_outline": -0.1}, "position_range_bias_outline"),
+    ({"position_range_bias_registered": 1.0}, "position_range_bias_registered"),
+    ({"position_range_bias_registered": float("nan")}, "position_range_bias_registered"),
     ([], "must be an object"),
 ])
 def test_bundle_refuses_bad_registration_sections(tmp_path, section, match):

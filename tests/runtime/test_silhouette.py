@@ -506,6 +506,50 @@ def test_a_badly_fitting_outline_gives_no_position_when_the_bundle_gates_it(tmp_
         assert res.position_valid is expected and bool(np.all(np.isfinite(res.position))) is expected, name
 
 
+def test_the_position_range_bias_moves_a_position_only_frame_towards_the_camera(tmp_path):
+    """``registration.position_range_bias_outline`` / ``..._registered``: a position-only frame's position moves
+    nearer along its line of sight by that many depth tolerances, by the key of the source it came from (the
+    outline's best fit when it fits within ``silhouette.max_chamfer_px``, else the registered pose)."""
+    from _bundle_fixtures import synthetic_pair
+
+    left, right = synthetic_pair()
+
+    def estimate(name, chamfer_px, outline_bias, registered_bias):
+        est = _estimator(tmp_path / name, {"min_margin": 0.99, "position_max_tau_m": 5.0,
+                                           "position_range_bias_outline": outline_bias,
+                                           "position_range_bias_registered": registered_bias},
+                         {"max_chamfer_px": 1.5, "min_margin_px": 5.0})
+        return _with_outline_chamfer(est, chamfer_px).estimate(left, right)
+
+    for chamfer, source in ((1.0, "outline"), (3.0, "registered")):
+        plain = estimate(f"p{source}", chamfer, 0.0, 0.0)
+        assert plain.status == "weak_votes" and plain.position_valid and plain.depth_tolerance_m > 0.0
+        biases = {"outline": (0.3, 0.0), "registered": (0.0, 0.3)}[source]
+        moved = estimate(f"m{source}", chamfer, *biases)
+        other = estimate(f"o{source}", chamfer, *biases[::-1])      # the other source's key: not moved
+        assert moved.status == "weak_votes" and moved.position_valid and not moved.valid
+        r0, r1 = np.linalg.norm(plain.position), np.linalg.norm(moved.position)
+        np.testing.assert_allclose(r0 - r1, 0.3 * plain.depth_tolerance_m, rtol=1e-9)
+        np.testing.assert_allclose(moved.position / r1, plain.position / r0, atol=1e-12)   # along the line of sight
+        np.testing.assert_array_equal(other.position, plain.position)
+        np.testing.assert_array_equal(moved.R, plain.R)
+
+
+def test_range_debiased_moves_along_the_line_of_sight_and_never_past_the_camera():
+    from spacepose.registration import range_debiased
+
+    p = np.array([3.0, 4.0, 12.0])                                  # range 13
+    np.testing.assert_allclose(range_debiased(p, 0.5, 0.2), p * 12.9 / 13.0)
+    np.testing.assert_array_equal(range_debiased(p, 0.5, 0.0), p)
+    assert range_debiased(p, 0.5, 0.0) is not p                     # a copy: the caller's array is not aliased
+    np.testing.assert_array_equal(range_debiased(p, 1e3, 0.5), np.zeros(3))
+    np.testing.assert_array_equal(range_debiased(p, float("nan"), 0.2), p)
+    nan = np.array([np.nan, 0.0, 1.0])
+    assert np.isnan(range_debiased(nan, 0.5, 0.2)[0])
+    with pytest.raises(ShapeError):
+        range_debiased(np.zeros(2), 0.5, 0.2)
+
+
 def test_the_estimator_searches_the_outline_when_the_bundle_asks(tmp_path):
     from _bundle_fixtures import synthetic_pair
 
