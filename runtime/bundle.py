@@ -607,7 +607,8 @@ def _parse_silhouette(section: Any, n_points: int, has_registration: bool) -> Si
                             zero_numbers=("depth_margin_m", "min_margin_px", "range_weight", "image_min_score",
                                           "image_min_margin_px", "image_max_background", "image_veto_score",
                                           "image_max_chamfer_px", "polish_range_weight", "search_separation_deg",
-                                          "points_weight", "track_max_chamfer_px", "max_decided_polish_deg"))
+                                          "points_weight", "track_max_chamfer_px", "max_decided_polish_deg",
+                                          "max_refused_track_polish_deg"))
     try:
         return SilhouetteConfig(**values)
     except ValueError as err:

@@ -791,6 +791,11 @@ class PoseEstimator:
             confidence = 0.5 * reg.inlier_fraction
             factors.update(tracked=1.0, route=_route_code("tracked"))
             decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer)
+            cap = 0.0 if bundle.silhouette is None else bundle.silhouette.max_refused_track_polish_deg
+            if cap > 0.0 and decided is not None and factors.get("polish_deg", 0.0) > cap:
+                return _stage_invalid(stage, "weak_votes", factors), (
+                    f"{refusal}; the previous pose tracks it, but the polish turns that pose "
+                    f"{factors['polish_deg']:.1f}° too (more than {cap:.1f}°)")
         bandwidth = stage.bandwidth if math.isfinite(stage.bandwidth) else reg.tau_m  # tolerance of the checks after
         n_inliers = int(round(reg.inlier_fraction * reg.n_points))  # PoseResult.n_points: the points it rests on
         return dataclasses.replace(stage, R=R, t=t, valid=True, status="ok", confidence=float(confidence),

@@ -109,6 +109,10 @@ class SilhouetteConfig:
         many degrees, as ``flip_classifier.max_polish_deg`` refuses the classifier's: on session 22's fresh frames
         the poses more than 10° off were turned further (reports/wrong_s31). 0 (the default, and every bundle
         without the key): never.
+    max_refused_track_polish_deg: a frame whose decided pose ``max_decided_polish_deg`` refused is reported from
+        the previous pose (tracked) only when the polish turns the tracked pose by at most this many degrees. The
+        tracked pose is mostly the refused one again, which the cap then no longer refuses (session 32, model
+        card). 0 (the default, and every bundle without the key): no such check.
     track_needs_outline: 1 reports a tracked pose (the previous pose decides between the pose and its
         flip) only when it is one of the outline-refined fits, within ``max_chamfer_px`` and near the
         previous pose; the registered pose alone is then neither reported nor kept to fall back on. On the
@@ -166,6 +170,7 @@ class SilhouetteConfig:
     polish_max_deg: float = 15.0
     polish_max_m: float = 1.0
     max_decided_polish_deg: float = 0.0
+    max_refused_track_polish_deg: float = 0.0
     track_needs_outline: int = 0
     track_max_chamfer_px: float = 0.0
     points_weight: float = 0.0
@@ -194,7 +199,7 @@ class SilhouetteConfig:
         if (self.polish not in (0, 1) or self.track_needs_outline not in (0, 1)
                 or not 0.0 <= self.polish_range_weight <= 1.0
                 or not self.polish_max_deg > 0 or not self.polish_max_m > 0
-                or not self.max_decided_polish_deg >= 0):
+                or not self.max_decided_polish_deg >= 0 or not self.max_refused_track_polish_deg >= 0):
             raise ValueError(f"invalid silhouette config {self}")
         if not (self.points_weight >= 0 and 0 < self.rival_deg < 180):
             raise ValueError(f"invalid silhouette config {self}")

@@ -287,12 +287,53 @@ def test_a_refused_decision_leaves_the_frame_to_the_previous_pose(tmp_path, monk
     assert not res.valid and res.status == "weak_votes" and word in res.detail
 
 
+@pytest.mark.parametrize("track_cap, turn, valid", [
+    (0.0, 4.0, True),      # no check: the previous pose tracks the refused pose (the behaviour before session 32)
+    (3.0, 4.0, False),     # the tracked pose is polished as far: refused too
+    (5.0, 4.0, True),      # within the tracked pose's own cap
+])
+def test_a_pose_tracked_after_a_refusal_must_keep_its_polish_within_the_bundles_cap(tmp_path, monkeypatch, track_cap,
+                                                                                      turn, valid):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.registration import exp_so3
+    from spacepose.silhouette import OutlineFit
+
+    left, right = synthetic_pair()
+    est = _flip_estimator(tmp_path, monkeypatch, 0.5, silhouette={
+        "polish": 1, "max_decided_polish_deg": 3.0, "max_refused_track_polish_deg": track_cap}, max_polish_deg=2.0)
+    assert est.bundle.silhouette.max_refused_track_polish_deg == track_cap
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 0.5, 0.8))
+    deg = {"turn": 1.0}
+
+    def polish(outline, R, t, *args, **kwargs):
+        return OutlineFit(exp_so3(np.array([np.radians(deg["turn"]), 0.0, 0.0])) @ R, np.asarray(t), 0.5)
+
+    monkeypatch.setattr(estimator_module, "polish_pose", polish)
+    est._roi_hint = lambda: None
+    assert est.estimate(left, right).valid             # the previous pose
+    deg["turn"] = turn                                 # the cap (3°) refuses the decided pose
+    res = est.estimate(left, right)
+    assert res.valid == valid, res.detail
+    if valid:
+        assert res.tracked and abs(res.polish_deg - turn) < 1e-6
+    else:
+        assert res.status == "weak_votes" and "outline route" in res.detail and "tracks it" in res.detail
+    est.reset()
+    deg["turn"] = 1.0                                  # a polish within both caps: decided, not tracked
+    res = est.estimate(left, right)
+    assert res.valid and not res.tracked
+
+
 def test_the_decided_polish_cap_must_not_be_negative():
     from spacepose.silhouette import SilhouetteConfig
 
     with pytest.raises(ValueError):
         SilhouetteConfig(max_decided_polish_deg=-1.0)
+    with pytest.raises(ValueError):
+        SilhouetteConfig(max_refused_track_polish_deg=float("nan"))
     assert SilhouetteConfig().max_decided_polish_deg == 0.0
+    assert SilhouetteConfig().max_refused_track_polish_deg == 0.0
 
 
 def test_a_classifier_decision_on_coarse_depth_is_refused(tmp_path, monkeypatch):

@@ -1,0 +1,118 @@
+"""Table and verdict of reports/polish_s32/rule.txt (the polish cap in sequences, session 32).
+
+    python reports/polish_s32/judge.py [RUNS]
+
+RUNS (default ``runs/s32``) holds ``sequence eval`` reports, made by the commands that
+``python reports/polish_s32/sequences.py fit base nocap`` and ``... check base nocap`` print, run from commit 43afab7
+(the bundle as shipped): ``base_<name>.json`` with the shipped bundle (``silhouette.max_decided_polish_deg`` 3.0),
+``nocap_<name>.json`` with a copy of it whose key is 0.0 (no cap: session 30's behaviour). When every run is there,
+the frames are cut to the columns used here and written to ``rows.json.gz`` beside this script; otherwise that
+committed file is read, so the verdict reproduces from the repository alone. The fit sequences (seeds 3011-3034,
+session 30's) were explored before the rule was written; the check sequences (seeds 3201-3216) were rendered after
+it was committed.
+
+The table's columns are session 30's (``reports/sequence_s30/judge.py``). "What the cap changed" compares the two
+runs frame by frame.
+"""
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "position_s25"))
+sys.path.insert(0, str(HERE.parent / "sequence_s30"))
+from _rows import compact_rows  # noqa: E402
+from judge import HEAD, KEYS, _line, summary  # noqa: E402  (reports/sequence_s30/judge.py)
+
+from spacepose.bundle import load_bundle  # noqa: E402
+from spacepose.tools.eval_pose import BAR_R_DEG, BAR_T_M  # noqa: E402
+
+_spec = importlib.util.spec_from_file_location("sequences_s32", HERE / "sequences.py")
+s32 = importlib.util.module_from_spec(_spec)   # reports/polish_s32/sequences.py (s30's has the same name)
+_spec.loader.exec_module(s32)
+
+MODES = ("base", "nocap")
+LABELS = {"base": "cap 3 deg", "nocap": "no cap"}
+EXTRA = ("decided_by", "confidence", "status", "detail")
+
+
+def wrong(r: dict) -> bool:
+    return r["e_R"] > 20.0 or r["e_t"] > 0.5
+
+
+def within(r: dict) -> bool:
+    return r["e_t"] <= BAR_T_M and r["e_R"] <= BAR_R_DEG
+
+
+def changes(rows: dict[str, list[dict]], which: str) -> dict[str, list[tuple[str, dict, dict]]]:
+    """Frames whose outcome the cap changed: ``lost`` (valid without the cap only), ``gained`` (with it only),
+    ``moved`` (valid in both, another pose or route); each ``(sequence, no-cap row, cap row)``."""
+    out: dict[str, list[tuple[str, dict, dict]]] = {"lost": [], "gained": [], "moved": []}
+    for name, *_ in s32.sequences(which):
+        for a, b in zip(rows[f"nocap_{name}"], rows[f"base_{name}"]):
+            if a["valid"] and not b["valid"]:
+                out["lost"].append((name, a, b))
+            elif b["valid"] and not a["valid"]:
+                out["gained"].append((name, a, b))
+            elif a["valid"] and (a["e_R"] != b["e_R"] or a["e_t"] != b["e_t"] or a["tracked"] != b["tracked"]):
+                out["moved"].append((name, a, b))
+    return out
+
+
+def _route(r: dict) -> str:
+    return "tracked" if r["tracked"] else (r["decided_by"] or "-")
+
+
+def print_changes(rows: dict[str, list[dict]], which: str) -> None:
+    ch = changes(rows, which)
+    print(f"{which}: what the cap changed, frame by frame (no cap -> cap 3 deg):")
+    for kind, items in ch.items():
+        n_wrong = sum(wrong(a if kind != "gained" else b) for _, a, b in items)
+        n_within = sum(within(a if kind != "gained" else b) for _, a, b in items)
+        print(f"  {kind:<7}{len(items):>4} poses, of them wrong {n_wrong}, within the bar {n_within}")
+        for name, a, b in items:
+            src = a if kind != "gained" else b
+            after = (f" -> {_route(b)} {b['e_R']:.1f} deg {b['e_t']:.2f} m" if kind == "moved" else "")
+            print(f"    {name} {src['frame']} {_route(src)} {src['e_R']:.1f} deg {src['e_t']:.2f} m{after}"
+                  + (f"  ({b['detail'][:90]})" if kind == "lost" else ""))
+
+
+def main(argv: list[str]) -> int:
+    runs = Path(argv[0]) if argv else Path("runs/s32")
+    which_all = [w for w in ("fit", "check") if all((runs / f"{m}_{n}.json").is_file()
+                                                    for n, *_ in s32.sequences(w) for m in MODES)]
+    committed = HERE / "rows.json.gz"
+    if which_all != ["fit", "check"] and committed.is_file():
+        which_all = []                          # read the committed rows (compact_rows: not every run is there)
+    sets = ("fit", "check") if not which_all else which_all
+    files = {f"{m}_{n}": [runs / f"{m}_{n}.json"] for w in sets for n, *_ in s32.sequences(w) for m in MODES}
+    rows = compact_rows(files, committed, KEYS + EXTRA, defaults={"roi": None})
+    sets = [w for w in ("fit", "check") if all(f"{m}_{n}" in rows for n, *_ in s32.sequences(w) for m in MODES)]
+    bundle = load_bundle(None, verify_graphs=False)
+    results = {}
+    print(HEAD)
+    for which in sets:
+        for mode in MODES:
+            frames = [r for name, *_ in s32.sequences(which) for r in rows[f"{mode}_{name}"]]
+            results[which, mode] = summary(frames, bundle)
+            print(_line(which, LABELS[mode], results[which, mode]))
+    print("(wrong: e_R > 20 deg or e_t > 0.5 m; within: e_t <= 0.10 m and e_R <= 2 deg; the other columns as in "
+          "reports/sequence_s30/judge.py)")
+    for which in sets:
+        print()
+        print_changes(rows, which)
+    if "check" in sets:
+        print()
+        print(verdict(results["check", "base"], results["check", "nocap"]))
+    return 0
+
+
+def verdict(cap: dict, nocap: dict) -> str:
+    """rule.txt's clauses on the 16 check sequences."""
+    raise NotImplementedError("written with the rule, after the fit sequences")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
