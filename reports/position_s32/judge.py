@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -40,6 +41,11 @@ def source(row: dict) -> str | None:
     if row["valid"] or not row["position_valid"]:
         return None
     return "outline" if row["outline_chamfer_px"] <= MAX_CHAMFER_PX else "registered"
+
+
+def _same(a, b) -> bool:
+    """Equal, NaN equal to NaN (an invalid frame's e_t and e_R)."""
+    return a == b or (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b))
 
 
 def position_table(rows: list[dict], shift: dict[str, float] | None = None) -> dict[str, dict[str, float]]:
@@ -113,7 +119,7 @@ def check(runs: Path) -> int:
     print_table("candidate", t_new)
     print_table("shipped, simulated", position_table(old, CANDIDATE))
     same = len(old) == len(new) and all(
-        a["frame"] == b["frame"] and all(a[k] == b[k] for k in ("valid", "status", "e_t", "e_R", "position_valid"))
+        a["frame"] == b["frame"] and all(_same(a[k], b[k]) for k in ("valid", "status", "e_t", "e_R", "position_valid"))
         for a, b in zip(old, new))
     fails = [] if same else ["1. the runs differ in a frame's valid, status, e_t, e_R or position_valid"]
     o, n = t_old["registered"], t_new["registered"]

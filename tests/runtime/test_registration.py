@@ -417,3 +417,12 @@ def test_a_conclusive_pose_half_turned_from_the_previous_one_is_not_reported(tmp
     assert not res.valid and res.status == "weak_votes" and "from the previous valid pose" in res.detail
     again = est.estimate(left, right)                         # that frame cleared the prior: decided alone again
     assert again.valid and rotation_error_deg(again.R, first.R) < 5.0
+
+
+def test_the_shipped_bundle_moves_positions_without_a_pose_nearer():
+    """Session 32 (reports/position_s32/rule.txt): 0.07 depth tolerances for a position from the outline's best fit,
+    0.24 for one from the registered pose; off (0) in a bundle without the keys."""
+    shipped = load_bundle(None, verify_graphs=False)
+    assert shipped.registration.position_range_bias_outline == 0.07
+    assert shipped.registration.position_range_bias_registered == 0.24
+    assert RegistrationConfig().position_range_bias_outline == RegistrationConfig().position_range_bias_registered == 0.0
