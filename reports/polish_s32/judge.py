@@ -3,9 +3,11 @@
     python reports/polish_s32/judge.py [RUNS]
 
 RUNS (default ``runs/s32``) holds ``sequence eval`` reports, made by the commands that
-``python reports/polish_s32/sequences.py fit base nocap`` and ``... check base nocap`` print, run from commit 43afab7
-(the bundle as shipped): ``base_<name>.json`` with the shipped bundle (``silhouette.max_decided_polish_deg`` 3.0),
-``nocap_<name>.json`` with a copy of it whose key is 0.0 (no cap: session 30's behaviour). When every run is there,
+``python reports/polish_s32/sequences.py fit base nocap trackcap`` and ``... check base nocap trackcap`` print, run
+from commit d1b5aa0 (the fit sequences' ``base`` and ``nocap`` runs from 43afab7, which behaves the same without the
+new key): ``base_<name>.json`` with the shipped bundle (``silhouette.max_decided_polish_deg`` 3.0),
+``nocap_<name>.json`` with a copy of it whose key is 0.0 (no cap: session 30's behaviour), ``trackcap_<name>.json``
+with a copy that adds ``silhouette.max_refused_track_polish_deg`` 3.0 (the candidate of rule.txt). When every run is there,
 the frames are cut to the columns used here and written to ``rows.json.gz`` beside this script; otherwise that
 committed file is read, so the verdict reproduces from the repository alone. The fit sequences (seeds 3011-3034,
 session 30's) were explored before the rule was written; the check sequences (seeds 3201-3216) were rendered after
@@ -33,8 +35,8 @@ _spec = importlib.util.spec_from_file_location("sequences_s32", HERE / "sequence
 s32 = importlib.util.module_from_spec(_spec)   # reports/polish_s32/sequences.py (s30's has the same name)
 _spec.loader.exec_module(s32)
 
-MODES = ("base", "nocap")
-LABELS = {"base": "cap 3 deg", "nocap": "no cap"}
+MODES = ("base", "nocap", "trackcap")
+LABELS = {"base": "cap 3 (shipped)", "nocap": "no cap", "trackcap": "cap + tracked"}
 EXTRA = ("decided_by", "confidence", "status", "detail")
 
 
@@ -46,12 +48,14 @@ def within(r: dict) -> bool:
     return r["e_t"] <= BAR_T_M and r["e_R"] <= BAR_R_DEG
 
 
-def changes(rows: dict[str, list[dict]], which: str) -> dict[str, list[tuple[str, dict, dict]]]:
-    """Frames whose outcome the cap changed: ``lost`` (valid without the cap only), ``gained`` (with it only),
-    ``moved`` (valid in both, another pose or route); each ``(sequence, no-cap row, cap row)``."""
+def changes(rows: dict[str, list[dict]], which: str, before: str, after: str
+            ) -> dict[str, list[tuple[str, dict, dict]]]:
+    """Frames whose outcome differs from mode ``before`` to mode ``after``: ``lost`` (valid in ``before`` only),
+    ``gained`` (in ``after`` only), ``moved`` (valid in both, another pose or route); each ``(sequence, before's
+    row, after's row)``."""
     out: dict[str, list[tuple[str, dict, dict]]] = {"lost": [], "gained": [], "moved": []}
     for name, *_ in s32.sequences(which):
-        for a, b in zip(rows[f"nocap_{name}"], rows[f"base_{name}"]):
+        for a, b in zip(rows[f"{before}_{name}"], rows[f"{after}_{name}"]):
             if a["valid"] and not b["valid"]:
                 out["lost"].append((name, a, b))
             elif b["valid"] and not a["valid"]:
@@ -65,9 +69,9 @@ def _route(r: dict) -> str:
     return "tracked" if r["tracked"] else (r["decided_by"] or "-")
 
 
-def print_changes(rows: dict[str, list[dict]], which: str) -> None:
-    ch = changes(rows, which)
-    print(f"{which}: what the cap changed, frame by frame (no cap -> cap 3 deg):")
+def print_changes(rows: dict[str, list[dict]], which: str, before: str, after: str) -> None:
+    ch = changes(rows, which, before, after)
+    print(f"{which}: what changed, frame by frame ({LABELS[before]} -> {LABELS[after]}):")
     for kind, items in ch.items():
         n_wrong = sum(wrong(a if kind != "gained" else b) for _, a, b in items)
         n_within = sum(within(a if kind != "gained" else b) for _, a, b in items)
@@ -101,17 +105,32 @@ def main(argv: list[str]) -> int:
     print("(wrong: e_R > 20 deg or e_t > 0.5 m; within: e_t <= 0.10 m and e_R <= 2 deg; the other columns as in "
           "reports/sequence_s30/judge.py)")
     for which in sets:
-        print()
-        print_changes(rows, which)
+        for before, after in (("nocap", "base"), ("base", "trackcap")):
+            print()
+            print_changes(rows, which, before, after)
     if "check" in sets:
         print()
-        print(verdict(results["check", "base"], results["check", "nocap"]))
+        print(verdict(results["check", "nocap"], results["check", "base"], results["check", "trackcap"]))
     return 0
 
 
-def verdict(cap: dict, nocap: dict) -> str:
-    """rule.txt's clauses on the 16 check sequences."""
-    raise NotImplementedError("written with the rule, after the fit sequences")
+def verdict(nocap: dict, shipped: dict, cand: dict) -> str:
+    """rule.txt's clauses on the 16 check sequences: part A (the shipped cap against none) and part B (the
+    candidate, ``max_refused_track_polish_deg`` 3.0, against the shipped bundle)."""
+    a = [f"A1. > 90 deg {shipped['flips']} > 0"] if shipped["flips"] > 0 else []
+    a += [f"A2. wrong {shipped['wrong']} > {nocap['wrong']}"] if shipped["wrong"] > nocap["wrong"] else []
+    a += [f"A3. valid {shipped['valid']} < 0.95 x {nocap['valid']}"] if shipped["valid"] < 0.95 * nocap["valid"] else []
+    a += [f"A4. within {shipped['within']} < {nocap['within']} - 3"] if shipped["within"] < nocap["within"] - 3 else []
+    b = [f"B1. > 90 deg {cand['flips']} > 0"] if cand["flips"] > 0 else []
+    b += [f"B2. wrong {cand['wrong']} > {shipped['wrong']}"] if cand["wrong"] > shipped["wrong"] else []
+    b += [f"B3. within {cand['within']} < {shipped['within']} - 2"] if cand["within"] < shipped["within"] - 2 else []
+    b += [f"B4. valid {cand['valid']} < 0.94 x {shipped['valid']}"] if cand["valid"] < 0.94 * shipped["valid"] else []
+    b += ([f"B5. mean e_R {cand['e_R_mean']:.3f} > {shipped['e_R_mean']:.3f}"]
+          if cand["e_R_mean"] > shipped["e_R_mean"] else [])
+    return ("verdict (rule.txt, the 16 check sequences):\n  A, the shipped cap against none: "
+            + ("MET" if not a else "NOT MET: " + "; ".join(a))
+            + "\n  B, the candidate (max_refused_track_polish_deg 3.0) against the shipped bundle: "
+            + ("MET" if not b else "NOT MET: " + "; ".join(b)))
 
 
 if __name__ == "__main__":

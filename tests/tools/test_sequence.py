@@ -42,7 +42,7 @@ def test_render_and_evaluate_a_short_sequence(tmp_path, capsys):
     s = report["summary"]
     assert s["frames"] == 3 and 0 <= s["valid"] <= 3 and s["flips"] <= s["valid"]
     assert {"status", "tracked", "e_t", "e_R", "flip_margin", "e_pos", "e_pos_los", "depth_tolerance_m",
-            "sigma_range_m", "sigma_rotation_deg"} <= set(report["frames"][0])
+            "sigma_range_m", "sigma_rotation_deg", "polish_deg", "polish_m"} <= set(report["frames"][0])
     for r in report["frames"]:   # the line-of-sight part of the centre's miss is a part of it
         assert (r["position_valid"] and abs(r["e_pos_los"]) <= r["e_pos"] + 1e-12) or (
             not r["position_valid"] and np.isnan(r["e_pos"]))
