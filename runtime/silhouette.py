@@ -109,10 +109,11 @@ class SilhouetteConfig:
         many degrees, as ``flip_classifier.max_polish_deg`` refuses the classifier's: on session 22's fresh frames
         the poses more than 10° off were turned further (reports/wrong_s31). 0 (the default, and every bundle
         without the key): never.
-    max_refused_track_polish_deg: a frame whose decided pose ``max_decided_polish_deg`` refused is reported from
-        the previous pose (tracked) only when the polish turns the tracked pose by at most this many degrees. The
-        tracked pose is mostly the refused one again, which the cap then no longer refuses (session 32, model
-        card). 0 (the default, and every bundle without the key): no such check.
+    max_refused_track_polish_deg: a frame whose decided pose a polish cap refused (``max_decided_polish_deg``, or
+        the flip classifier's ``max_polish_deg``) is reported from the previous pose (tracked) only when the polish
+        turns the tracked pose by at most this many degrees. The tracked pose is mostly the refused one again, which
+        the caps do not refuse on the tracking route (session 32, model card "The polish cap in sequences"). 0 (the
+        default, and every bundle without the key): no such check.
     track_needs_outline: 1 reports a tracked pose (the previous pose decides between the pose and its
         flip) only when it is one of the outline-refined fits, within ``max_chamfer_px`` and near the
         previous pose; the registered pose alone is then neither reported nor kept to fall back on. On the
