@@ -1,6 +1,7 @@
 """Table and verdict of reports/polish_s32/rule.txt (the polish cap in sequences, session 32).
 
-    python reports/polish_s32/judge.py [RUNS]
+    python reports/polish_s32/judge.py [RUNS]              # rule.txt (round 1)
+    python reports/polish_s32/judge.py --round2 [RUNS]     # rule2.txt (round 2)
 
 RUNS (default ``runs/s32``) holds ``sequence eval`` reports, made by the commands that
 ``python reports/polish_s32/sequences.py fit base nocap trackcap`` and ``... check base nocap trackcap`` print, run
@@ -12,6 +13,11 @@ the frames are cut to the columns used here and written to ``rows.json.gz`` besi
 committed file is read, so the verdict reproduces from the repository alone. The fit sequences (seeds 3011-3034,
 session 30's) were explored before the rule was written; the check sequences (seeds 3201-3216) were rendered after
 it was committed.
+
+Round 2 (rule2.txt) reads ``base_<name>.json`` and ``trackcap2_<name>.json`` of the ``check2`` sequences (seeds
+3231-3246; ``python reports/polish_s32/sequences.py check2 base trackcap2``, run from commit 88cd5d0; ``trackcap2`` is
+that commit's default bundle with ``silhouette.max_refused_track_polish_deg`` 3.0) and keeps its rows in
+``rows2.json.gz``.
 
 The table's columns are session 30's (``reports/sequence_s30/judge.py``). "What the cap changed" compares the two
 runs frame by frame.
@@ -36,7 +42,8 @@ s32 = importlib.util.module_from_spec(_spec)   # reports/polish_s32/sequences.py
 _spec.loader.exec_module(s32)
 
 MODES = ("base", "nocap", "trackcap")
-LABELS = {"base": "cap 3 (shipped)", "nocap": "no cap", "trackcap": "cap + tracked"}
+MODES2 = ("base", "trackcap2")
+LABELS = {"base": "cap 3 (shipped)", "nocap": "no cap", "trackcap": "cap + tracked", "trackcap2": "cap + tracked"}
 EXTRA = ("decided_by", "confidence", "status", "detail")
 
 
@@ -83,7 +90,38 @@ def print_changes(rows: dict[str, list[dict]], which: str, before: str, after: s
                   + (f"  ({b['detail'][:90]})" if kind == "lost" else ""))
 
 
+def round2(runs: Path) -> int:
+    """rule2.txt: the candidate against the shipped bundle on the 16 ``check2`` sequences."""
+    names = [name for name, *_ in s32.sequences("check2")]
+    files = {f"{m}_{n}": [runs / f"{m}_{n}.json"] for n in names for m in MODES2}
+    rows = compact_rows(files, HERE / "rows2.json.gz", KEYS + EXTRA, defaults={"roi": None})
+    bundle = load_bundle(None, verify_graphs=False)
+    res = {}
+    print(HEAD)
+    for mode in MODES2:
+        res[mode] = summary([r for n in names for r in rows[f"{mode}_{n}"]], bundle)
+        print(_line("check2", LABELS[mode], res[mode]))
+    print()
+    print_changes(rows, "check2", "base", "trackcap2")
+    old, new = res["base"], res["trackcap2"]
+    lost_within = sum(within(a) for _, a, _ in changes(rows, "check2", "base", "trackcap2")["lost"])
+    fails = [f"C1. > 90 deg {new['flips']} > 0"] if new["flips"] > 0 else []
+    fails += [f"C2. wrong {new['wrong']} > {old['wrong']}"] if new["wrong"] > old["wrong"] else []
+    fails += [f"C3. within {new['within']} < {old['within']} - 2"] if new["within"] < old["within"] - 2 else []
+    fails += [f"C4. valid {new['valid']} < 0.94 x {old['valid']}"] if new["valid"] < 0.94 * old["valid"] else []
+    fails += ([f"C5. mean e_R {new['e_R_mean']:.4f} > {old['e_R_mean']:.4f} + 0.05"]
+              if new["e_R_mean"] > old["e_R_mean"] + 0.05 else [])
+    fails += [f"C6. {lost_within} dropped poses within the bar > 1"] if lost_within > 1 else []
+    print()
+    print(f"mean e_R: shipped {old['e_R_mean']:.4f}, candidate {new['e_R_mean']:.4f} deg")
+    print("verdict (rule2.txt, the 16 check2 sequences, candidate max_refused_track_polish_deg 3.0): "
+          + ("MET" if not fails else "NOT MET: " + "; ".join(fails)))
+    return 0
+
+
 def main(argv: list[str]) -> int:
+    if argv[:1] == ["--round2"]:
+        return round2(Path(argv[1]) if len(argv) > 1 else Path("runs/s32"))
     runs = Path(argv[0]) if argv else Path("runs/s32")
     which_all = [w for w in ("fit", "check") if all((runs / f"{m}_{n}.json").is_file()
                                                     for n, *_ in s32.sequences(w) for m in MODES)]
