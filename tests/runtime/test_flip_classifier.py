@@ -467,3 +467,5 @@ def test_the_shipped_bundle_caps_the_polish_of_decided_poses():
     shipped = load_bundle(None, verify_graphs=False)
     assert shipped.silhouette.max_decided_polish_deg == 3.0
     assert shipped.flip_classifier.max_polish_deg == 2.0
+    # session 32 (reports/polish_s32/rule2.txt): a pose tracked after a refusal is held to 3° as well
+    assert shipped.silhouette.max_refused_track_polish_deg == 3.0
