@@ -25,6 +25,19 @@ def sequences(which: str) -> list[tuple[str, int, int, str, int]]:
             for i in range(count)]
 
 
+def print_commands(sequences_: list[tuple[str, int, int, str, int]], modes: list[str], session: str) -> None:
+    """A render command per sequence and an eval command per sequence and mode, for the later sessions' scripts:
+    ``base`` with the shipped bundle, any other mode with ``/tmp/<session>/bundles/<mode>``; reports to
+    ``runs/<session>/<mode>_<name>.json``."""
+    for name, seed, distance, regime, rate in sequences_:
+        print(f"python -m spacepose.tools.sequence render data/{name} --frames 40 --distance {distance} --rate {rate} "
+              f"--regime {regime} --seed {seed}")
+        for mode in modes:
+            bundle = "" if mode == "base" else f" --bundle /tmp/{session}/bundles/{mode}"
+            print(f"python -m spacepose.tools.sequence eval data/{name} --threads 1{bundle} "
+                  f"--json runs/{session}/{mode}_{name}.json")
+
+
 def main(argv: list[str]) -> int:
     for name, seed, distance, regime, rate in sequences(argv[0] if argv else "fit"):
         print(f"python -m spacepose.tools.sequence render data/{name} --frames 40 --distance {distance} --rate {rate} "

@@ -27,13 +27,7 @@ def sequences(which: str) -> list[tuple[str, int, int, str, int]]:
 
 def main(argv: list[str]) -> int:
     which = argv[0] if argv else "fit"
-    modes = argv[1:] or ["base"]
-    for name, seed, distance, regime, rate in sequences(which):
-        print(f"python -m spacepose.tools.sequence render data/{name} --frames 40 --distance {distance} --rate {rate} "
-              f"--regime {regime} --seed {seed}")
-        for mode in modes:
-            bundle = "" if mode == "base" else f" --bundle /tmp/s31/bundles/{mode}"
-            print(f"python -m spacepose.tools.sequence eval data/{name} --threads 1{bundle} --json runs/s31/{mode}_{name}.json")
+    s30.print_commands(sequences(which), argv[1:] or ["base"], "s31")
     return 0
 
 
