@@ -1,8 +1,8 @@
 """The stereo graph's signed disparity error over the target (session 32): is it biased?
 
-    python reports/position_s32/disparity_bias.py [DATASET] [--first 2700] [--count 40] [--out FILE]
+    python reports/position_s32/disparity_bias.py [DATASET] [--first 2700] [--count 40] [--out FILE] [--bundle DIR]
 
-Runs ``spacepose disparity`` (the shipped bundle, the whole runtime stereo stage: coarse pass, window, fine pass) on
+Runs ``spacepose disparity`` (the shipped bundle unless ``--bundle``; the whole runtime stereo stage: coarse pass, window, fine pass) on
 frames ``first .. first+count-1`` of DATASET (default ``data/tdrs640``, made by ``spacepose render data/tdrs640
 --target tdrs --count 3000 --size 640x480 --seed 1``; frames 2700-2999 are its test split) and compares the maps
 with the rendered disparity over the target's mask: its interior (the mask eroded by a 7x7 square) and its rim
@@ -43,6 +43,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--first", type=int, default=2700)
     ap.add_argument("--count", type=int, default=40)
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "disparity_bias.json")
+    ap.add_argument("--bundle", type=Path, default=None, help="model bundle folder (default: the shipped one)")
     args = ap.parse_args(argv)
     names = [f"{i:06d}" for i in range(args.first, args.first + args.count)]
     with tempfile.TemporaryDirectory() as tmp:
@@ -52,7 +53,7 @@ def main(argv: list[str]) -> int:
             for n in names:
                 (work / side / f"{n}.png").symlink_to((args.dataset / side / f"{n}.png").resolve())
         if cli_main(["disparity", str(work), "--calib", str(args.dataset / "rig.yaml"), "--out", str(work / "pred"),
-                     "--threads", "1"]) != 0:
+                     "--threads", "1", *(["--bundle", str(args.bundle)] if args.bundle else [])]) != 0:
             raise SystemExit("spacepose disparity failed")
         rows = []
         for n in names:
