@@ -43,9 +43,10 @@ pos32 = _load("judge_s32", HERE.parent / "position_s32" / "judge.py")   # positi
 MODES = ("base", "gpu19")
 LABELS = {"base": "shipped", "gpu19": "candidate"}
 KEYS = ("frame", "valid", "status", "e_t", "e_R", "position_valid", "e_pos", "e_pos_los", "depth_tolerance_m",
-        "outline_chamfer_px", "distance", "regime", "decided_by")
+        "outline_chamfer_px", "outline_margin_px", "flip_prob", "confidence", "polish_deg", "distance", "regime",
+        "decided_by")
 SEQ_KEYS = ("frame", "valid", "tracked", "e_t", "e_R", "position_valid", "e_pos", "e_pos_los", "depth_tolerance_m",
-            "outline_chamfer_px", "decided_by")
+            "outline_chamfer_px", "confidence", "polish_deg", "decided_by")
 # eval-pose folders per set: (folder stems, what the set is)
 EXPLORE_SETS = {"test": (["test"], "test split, 300 frames (data/tdrs640)"),
                 "unseen": (["unseen"], "unseen 1280x960, 90 frames (data/tdrs1280_eval)"),
