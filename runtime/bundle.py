@@ -58,9 +58,10 @@ A bundle is a folder::
                                        # needs registration: the covariance of a position reported
                                        # without a pose (PositionUncertaintyConfig)
       "confidence": {"position_m": 0.1, "rotation_deg": 2.0, "bias": 1.6,
-                     "slope": 1.3},   # optional, needs uncertainty: a valid pose's confidence is the
-                                       # (recalibrated) probability of being within the tolerance
-                                       # (spacepose.confidence.ConfidenceConfig)
+                     "slope": 1.3, "min_valid": 0.08},   # optional, needs uncertainty: a valid pose's
+                                       # confidence is the (recalibrated) probability of being within the
+                                       # tolerance; a pose under min_valid (optional, default 0) is reported
+                                       # weak_votes (spacepose.confidence.ConfidenceConfig)
       "rig": {"image_size": [640, 480], "focal_px": 800.0, "baseline_m": 1.0},
       "distance_range_m": [10.0, 50.0],
       "dataset": {"seed": 0, "size": 10000},

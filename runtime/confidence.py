@@ -50,12 +50,16 @@ class ConfidenceConfig:
     rotation_deg: the rotation tolerance (degrees, > 0).
     bias, slope: the logistic recalibration of the normal model's probability (``slope`` > 0, so that the
         confidence grows with that probability).
+    min_valid: the floor, in [0, 1): a pose whose confidence is under it is reported invalid (``weak_votes``,
+        :class:`spacepose.estimator.PoseResult`). Optional in ``bundle.json``; 0, the default, reports every pose
+        the decision routes pass.
     """
 
     position_m: float
     rotation_deg: float
     bias: float
     slope: float
+    min_valid: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -65,6 +69,8 @@ class ConfidenceConfig:
         for name in ("position_m", "rotation_deg", "slope"):
             if getattr(self, name) <= 0.0:
                 raise ValueError(f"confidence.{name} must be > 0, got {getattr(self, name)!r}")
+        if not 0.0 <= self.min_valid < 1.0:
+            raise ValueError(f"confidence.min_valid must be in [0, 1), got {self.min_valid!r}")
 
 
 @lru_cache(maxsize=1)
@@ -116,4 +122,4 @@ def calibrated_confidence(p: float, config: ConfidenceConfig) -> float:
 
 def parse_confidence(section: Any) -> ConfidenceConfig | None:
     """The bundle's ``confidence`` section (``None`` when absent); ``BundleError`` when malformed."""
-    return parse_number_section(section, "confidence", ConfidenceConfig)
+    return parse_number_section(section, "confidence", ConfidenceConfig, optional=("min_valid",))

@@ -105,7 +105,10 @@ class PoseResult:
             bundle's since session 30): the probability that the pose is within that section's tolerance
             (0.10 m and 2 degrees), from its ``position_cov`` and ``sigma_rotation_deg``
             (:mod:`spacepose.confidence`; 0 for a valid pose without them); it falls as the errors grow. Without
-            the section: ``decision_confidence``.
+            the section: ``decision_confidence``. A pose under the section's ``min_valid`` floor is not reported:
+            the frame is ``weak_votes`` (``detail`` gives the confidence), with the position it would have had
+            without a decision (``position_valid`` where the position gates pass), and the pose is not the next
+            frame's prior.
         decision_confidence: how sure the route that decided the pose was (:mod:`spacepose.pose_stage`;
             with registration, the inlier share times a margin term, :meth:`PoseEstimator._register`); 0 when
             not valid. It does not rank the pose's errors. Not part of the JSON line.
@@ -560,6 +563,15 @@ class PoseEstimator:
                                              sigma_rotation_deg=spread.sigma_rotation_deg)
             if self.bundle.confidence is not None:
                 result = dataclasses.replace(result, confidence=self._pose_confidence(spread))
+                floor = self.bundle.confidence.min_valid
+                if result.confidence < floor:
+                    # too unsure to hand to a navigation filter: the frame reports what it would without a
+                    # decision (the position from the factors, where the position gates passed), and the pose
+                    # does not become the next frame's prior
+                    detail = (f"confidence {result.confidence:.3f} under the bundle's floor {floor:g} "
+                              f"(confidence.min_valid)")
+                    return self._result("weak_votes", timer, stage=_stage_invalid(stage, "weak_votes"),
+                                        window=window, detail=detail)
         elif position_valid and not valid and self.bundle.position_uncertainty is not None:
             spread = position_uncertainty(position, result.depth_tolerance_m, self.focal_px,
                                           self.bundle.position_uncertainty, result.outline_chamfer_px)

@@ -82,7 +82,8 @@ def test_the_recalibration_is_the_identity_at_bias_0_slope_1_and_monotone():
 
 @pytest.mark.parametrize("changes,match", [({"position_m": 0.0}, "position_m"), ({"rotation_deg": -1.0}, "rotation_deg"),
                                            ({"slope": 0.0}, "slope"), ({"bias": float("nan")}, "bias"),
-                                           ({"bias": True}, "bias")])
+                                           ({"bias": True}, "bias"), ({"min_valid": -0.01}, "min_valid"),
+                                           ({"min_valid": 1.0}, "min_valid"), ({"min_valid": True}, "min_valid")])
 def test_bad_constants_are_refused(changes, match):
     with pytest.raises(ValueError, match=match):
         ConfidenceConfig(**{**SECTION, **changes})
@@ -99,6 +100,10 @@ def test_malformed_sections_are_refused(section, match):
 def test_an_absent_section_is_none_and_a_good_one_parses():
     assert parse_confidence(None) is None
     assert parse_confidence(dict(SECTION)) == CONFIG
+    assert CONFIG.min_valid == 0.0                       # the floor is optional and off by default
+    assert parse_confidence({**SECTION, "min_valid": 0.08}).min_valid == 0.08
+    with pytest.raises(BundleError, match="min_valid"):
+        parse_confidence({**SECTION, "min_valid": 1.5})
 
 
 def test_the_bundle_section_needs_the_uncertainty_section(tmp_path):
@@ -179,3 +184,41 @@ def test_a_valid_pose_without_a_rotation_sigma_claims_no_accuracy(tmp_path, monk
     assert res.valid and res.confidence == 0.0
     res = est.estimate(np.zeros_like(left), np.zeros_like(right))   # eclipse: no pose, no confidence
     assert not res.valid and res.confidence == 0.0 and res.decision_confidence == 0.0
+
+
+def test_a_pose_under_the_floor_is_refused_and_not_the_next_prior(tmp_path, monkeypatch):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from test_flip_classifier import _decision
+
+    left, right = synthetic_pair()
+
+    def run(name, floor, registration=None):
+        section = {**SECTION, "min_valid": floor} if floor is not None else SECTION
+        more = {"confidence": section, **({"registration": registration} if registration else {})}
+        est = _estimator(tmp_path / name, monkeypatch, more)
+        monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 1.2, 0.3))
+        return est, est.estimate(left, right)
+
+    _, free = run("free", None)
+    assert free.valid, free.detail
+    c = free.confidence
+    assert 0.0 < c < 0.9
+    # a floor under the pose's confidence changes nothing
+    est, low = run("low", 0.5 * c)
+    assert low.valid and np.array_equal(low.R, free.R) and low.confidence == c and est._prior is low
+    # a floor over it: invalid, weak_votes, the reason in the detail, nothing of the pose reported, no prior
+    est, high = run("high", 0.5 * (c + 1.0))
+    assert (high.valid, high.status, high.confidence, high.decision_confidence) == (False, "weak_votes", 0.0, 0.0)
+    assert "min_valid" in high.detail and f"{c:.3f}" in high.detail
+    assert np.all(np.isnan(high.R)) and np.all(np.isnan(high.t)) and np.all(np.isnan(high.q_wxyz))
+    assert high.decided_by == "" and not high.tracked and np.isnan(high.sigma_rotation_deg)
+    assert est._prior is None
+    # without the registration's position gate (the default) there is no position either ...
+    assert not high.position_valid and np.all(np.isnan(high.position))
+    line = json.loads(json.dumps(high.to_dict("f")))
+    assert line["valid"] is False and line["R"][0] == [None, None, None] and line["confidence"] == 0.0
+    # ... with it, the position a frame without a decision reports, near the refused pose's centre
+    _, placed = run("placed", 0.5 * (c + 1.0), {"min_margin": 0.0, "position_max_tau_m": 9.0})
+    assert not placed.valid and placed.status == "weak_votes" and placed.position_valid
+    assert np.linalg.norm(placed.position - free.position) < 0.5
