@@ -1,14 +1,17 @@
 """Tables and verdict of reports/floor_s34/rule.txt (session 19's stereo graph with a floor of 0.08 on the
 reported confidence, against the shipped bundle).
 
-    python reports/floor_s34/judge.py [RUNS]
+    python reports/floor_s34/judge.py [RUNS]             # round 1: rule.txt
+    python reports/floor_s34/judge.py --round2 [RUNS]    # round 2: rule2.txt, both rounds pooled
 
 RUNS (default ``runs/s34``) holds the reports of the commands in rule.txt: ``eval-pose`` folders
 ``<set>_<mode>/pose_eval.json``, ``eval-stereo`` folders ``stereo_<mode>/stereo_eval.json`` and ``sequence eval``
 reports ``<mode>_<name>.json``; ``mode`` is ``base`` (the shipped bundle) or ``cand`` (rule.txt's candidate). When
 every run is there, its frames are cut to the columns used here and written beside this script (``rows.json.gz``;
 the stereo metrics to ``stereo.json``); otherwise those committed files are read, so the tables and the verdict
-reproduce from the repository alone.
+reproduce from the repository alone. Round 2 adds ``rows2.json.gz``: the runs of rule2.txt (sets ``c*``, ``d``, the
+``check2`` sequences for ``base`` and ``cand``; the sequences of both rounds for ``floor``, the shipped bundle with the
+floor alone, whose independent frames are the base rows with poses under the floor turned invalid).
 
 Wrong: a valid pose off by more than 20 deg or 0.5 m; within the bar: e_t <= 0.10 m and e_R <= 2 deg; > 90: a
 valid pose more than 90 deg off. Position-only frames: session 32's table (reports/position_s32/judge.py).
@@ -45,12 +48,27 @@ SETS = {"a": (["a0", "a1", "a2"], "tdrs640_s34a (seed 3401), train frames 0-900"
 SEQ_KEYS = s33.SEQ_KEYS + ("status", "detail")
 
 
-def pose_rows(runs: Path, rows_path: Path) -> dict[str, list[dict]]:
-    """Every set's rows per mode (``<set>_<mode>``, ``seq_<mode>_<name>``): cut from the runs and written to
-    ``rows_path`` when they are all there, else read from it."""
+SETS2 = {"a2": (["c0", "c1", "c2"], "tdrs640_s34c (seed 3441), train frames 0-900"),
+         "b2": (["d"], "tdrs1280_s34d (seed 3442), its 54 train frames")}
+
+
+def round2_files(runs: Path) -> dict[str, list[Path]]:
+    """rule2.txt's runs per group."""
     files = {f"{name}_{m}": [runs / f"{stem}_{m}" / "pose_eval.json" for stem in stems]
-             for name, (stems, _) in SETS.items() for m in MODES}
-    files.update({f"seq_{m}_{n}": [runs / f"{m}_{n}.json"] for n, *_ in seqs.sequences("check") for m in MODES})
+             for name, (stems, _) in SETS2.items() for m in MODES}
+    files.update({f"seq_{m}_{n}": [runs / f"{m}_{n}.json"] for n, *_ in seqs.sequences("check2")
+                  for m in MODES + ("floor",)})
+    files.update({f"seq_floor_{n}": [runs / f"floor_{n}.json"] for n, *_ in seqs.sequences("check")})
+    return files
+
+
+def pose_rows(runs: Path, rows_path: Path, files: dict[str, list[Path]] | None = None) -> dict[str, list[dict]]:
+    """Every set's rows per mode (``<set>_<mode>``, ``seq_<mode>_<name>``): cut from the runs and written to
+    ``rows_path`` when they are all there, else read from it. ``files``: the runs per group (round 1's by default)."""
+    if files is None:
+        files = {f"{name}_{m}": [runs / f"{stem}_{m}" / "pose_eval.json" for stem in stems]
+                 for name, (stems, _) in SETS.items() for m in MODES}
+        files.update({f"seq_{m}_{n}": [runs / f"{m}_{n}.json"] for n, *_ in seqs.sequences("check") for m in MODES})
     if not all(f.is_file() for fs in files.values() for f in fs):
         with gzip.open(rows_path, "rt") as fh:
             return json.load(fh)
@@ -190,7 +208,80 @@ def verdict(c: dict[str, dict[str, dict]], stereo: dict[str, dict[str, float]], 
     return "verdict (rule.txt): " + ("MET" if not fails else "NOT MET: " + "; ".join(fails))
 
 
+def round2(runs: Path) -> int:
+    """rule2.txt: round 2's table, both rounds pooled, and the verdicts for B (cand) and A (floor)."""
+    rows = {**pose_rows(runs, HERE / "rows.json.gz"), **pose_rows(runs, HERE / "rows2.json.gz", round2_files(runs))}
+    for name in list(SETS) + list(SETS2):       # the floor's independent frames: the base rows, floored
+        rows[f"{name}_floor"] = floored(rows[f"{name}_base"], FLOOR)
+    modes, labels = MODES + ("floor",), {**LABELS, "floor": "shipped + floor"}
+    seq1, seq2 = ([n for n, *_ in seqs.sequences(w)] for w in ("check", "check2"))
+    group = {name: (lambda m, name=name: rows[f"{name}_{m}"]) for name in list(SETS) + list(SETS2)}
+    group["seq"] = lambda m: [r for n in seq1 for r in rows[f"seq_{m}_{n}"]]
+    group["seq2"] = lambda m: [r for n in seq2 for r in rows[f"seq_{m}_{n}"]]
+    c: dict[str, dict[str, dict]] = {}
+    print(HEAD)
+    for name in ("a2", "b2", "seq2", "round1", "round2", "pooled"):
+        parts = {"round1": ("a", "b", "seq"), "round2": ("a2", "b2", "seq2"),
+                 "pooled": ("a", "b", "seq", "a2", "b2", "seq2")}.get(name, (name,))
+        for m in modes:
+            c.setdefault(name, {})[m] = s33.counts([r for part in parts for r in group[part](m)])
+            print(line(name, labels[m], c[name][m]))
+    print("  a2: " + SETS2["a2"][1] + "; b2: " + SETS2["b2"][1])
+    print(f"  seq2: {len(seq2)} sequences of 40 frames ({seq2[0]} ... {seq2[-1]}; reports/floor_s34/sequences.py "
+          "check2); round1: rule.txt's sets a, b and seq")
+    print("  shipped + floor: the shipped bundle with confidence.min_valid 0.08 (sequences run; independent frames "
+          "are the shipped rows with poses under 0.08 turned invalid, exact without a prior)")
+    print()
+    print("wrong valid poses of round 2 (set, frame, e_R, e_t, route, chamfer, confidence):")
+    for m in modes:
+        keyed = [(name, r) for name in SETS2 for r in rows[f"{name}_{m}"]]
+        keyed += [(n, r) for n in seq2 + (seq1 if m == "floor" else []) for r in rows[f"seq_{m}_{n}"]]
+        for where, r in keyed:
+            if r["valid"] and s33.wrong(r):
+                print(f"  {labels[m]:<16}{where:<8}{r['frame']}  e_R {r['e_R']:6.1f}  e_t {r['e_t']:.2f}  "
+                      f"{r.get('decided_by') or '-':<12}chamfer {r['outline_chamfer_px']:.2f}  "
+                      f"confidence {r['confidence']:.3f}")
+    print()
+    for m in modes:
+        seq = group["seq"](m) + group["seq2"](m)
+        print(f"sequences of both rounds, {labels[m]}: {sum('min_valid' in (r.get('detail') or '') for r in seq)} "
+              f"poses refused by the floor; tracked valid {sum(bool(r['valid'] and r['tracked']) for r in seq)}")
+    print()
+    print("position-only frames, independent frames of both rounds:")
+    for m in MODES:
+        pos32.print_table(f"a+b+a2+b2 {labels[m]}", pos32.position_table(
+            [r for name in list(SETS) + list(SETS2) for r in rows[f"{name}_{m}"]]))
+    print()
+    base, cand, floor = (c["pooled"][m] for m in modes)
+    fails = [f"B1. valid poses > 90 deg off: {cand['flips']}"] if cand["flips"] else []
+    fails += [f"B2. wrong {cand['wrong']} > {base['wrong']}"] if cand["wrong"] > base["wrong"] else []
+    fails += ([f"B3. > 20 deg {cand['rotated']} > {base['rotated']} + 1"]
+              if cand["rotated"] > base["rotated"] + 1 else [])
+    fails += ([f"B4. within {cand['within']} < 1.10 x {base['within']}"]
+              if cand["within"] < 1.10 * base["within"] else [])
+    fails += [f"B5. valid {cand['valid']} < 0.90 x {base['valid']}"] if cand["valid"] < 0.90 * base["valid"] else []
+    ind = list(SETS) + list(SETS2)
+    t_base = pos32.position_table([r for name in ind for r in rows[f"{name}_base"]])["all"]
+    t_cand = pos32.position_table([r for name in ind for r in rows[f"{name}_cand"]])["all"]
+    fails += ([f"B6. position-only e_pos {t_cand['e_pos']:.3f} > {t_base['e_pos']:.3f} + 0.02"]
+              if t_cand["e_pos"] > t_base["e_pos"] + 0.02 else [])
+    fails += ([f"B6. position-only within tau {t_cand['within_tau']:.3f} < {t_base['within_tau']:.3f} - 0.03"]
+              if t_cand["within_tau"] < t_base["within_tau"] - 0.03 else [])
+    print("verdict B (rule2.txt): " + ("MET" if not fails else "NOT MET: " + "; ".join(fails)))
+    fails = [f"A1. valid poses > 90 deg off: {floor['flips']}"] if floor["flips"] else []
+    fails += [f"A2. wrong {floor['wrong']} > {base['wrong']}"] if floor["wrong"] > base["wrong"] else []
+    fails += [f"A3. > 20 deg {floor['rotated']} > {base['rotated']}"] if floor["rotated"] > base["rotated"] else []
+    fails += ([f"A4. within {floor['within']} < 0.97 x {base['within']}"]
+              if floor["within"] < 0.97 * base["within"] else [])
+    fails += ([f"A5. valid {floor['valid']} < 0.85 x {base['valid']}"]
+              if floor["valid"] < 0.85 * base["valid"] else [])
+    print("verdict A (rule2.txt): " + ("MET" if not fails else "NOT MET: " + "; ".join(fails)))
+    return 0
+
+
 def main(argv: list[str]) -> int:
+    if argv[:1] == ["--round2"]:
+        return round2(Path(argv[1]) if argv[1:] else Path("runs/s34"))
     runs = Path(argv[0]) if argv else Path("runs/s34")
     rows = pose_rows(runs, HERE / "rows.json.gz")
     stereo = stereo_metrics(runs)
