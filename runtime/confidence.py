@@ -20,6 +20,9 @@ shipped tolerance is the pose bar of the project's issue 6: 0.10 m and 2 degrees
 ``Sigma`` has the shape :func:`spacepose.uncertainty.pose_uncertainty` gives it: one sigma along the
 line of sight and one, the same, on both axes across it. ``p_pos`` integrates the range axis by
 Gauss-Legendre quadrature; the two cross-range axes in closed form (a 2-D normal's radius).
+
+The section's optional ``min_valid`` is a floor: the estimator reports a pose under it as ``weak_votes`` (the
+default bundle's 0.08 since session 34; the model card, "A floor on the confidence").
 """
 
 from __future__ import annotations
