@@ -532,7 +532,7 @@ def _confidence_main(parser: argparse.ArgumentParser, args: argparse.Namespace,
                                     tolerance.rotation_deg)
         except ValueError as err:
             parser.error(f"cannot fit the confidence on these reports: {err}")
-        out["fit"] = asdict(config)
+        out["fit"] = {k: v for k, v in asdict(config).items() if k != "min_valid"}   # a floor is chosen, not fitted
         print(json.dumps({"confidence": out["fit"]}, indent=1))
     out["check"] = {}
     for (path, err, _), p_i, w_i in zip(per_report, p, within):

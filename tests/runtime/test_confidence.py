@@ -222,3 +222,8 @@ def test_a_pose_under_the_floor_is_refused_and_not_the_next_prior(tmp_path, monk
     _, placed = run("placed", 0.5 * (c + 1.0), {"min_margin": 0.0, "position_max_tau_m": 9.0})
     assert not placed.valid and placed.status == "weak_votes" and placed.position_valid
     assert np.linalg.norm(placed.position - free.position) < 0.5
+
+
+def test_the_shipped_bundle_has_the_floor_of_session_34():
+    """reports/floor_s34/rule2.txt shipped confidence.min_valid 0.08 with session 19's stereo graph."""
+    assert load_bundle(None, verify_graphs=False).confidence.min_valid == 0.08
