@@ -11,40 +11,27 @@ which these rows cannot show, so the sequences' part is an estimate.
 """
 from __future__ import annotations
 
-import gzip
-import json
-import math
+import importlib.util
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROWS = [HERE.parent / "stereo_s33" / "rows_explore.json.gz", HERE.parent / "stereo_s33" / "rows.json.gz"]
 FLOORS = (0.0, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.09, 0.10, 0.12, 0.15)
 
-
-def _f(row: dict, key: str) -> float:
-    value = row.get(key)
-    return float(value) if isinstance(value, (int, float)) else math.nan
+_spec = importlib.util.spec_from_file_location("judge_s34", HERE / "judge.py")
+judge = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(judge)   # floored; its _load and s33 (session 33's judge: counts)
+floor_s33 = judge._load("confidence_floor_s33", HERE.parent / "stereo_s33" / "confidence_floor.py")   # valid_rows
 
 
 def load(mode: str) -> list[dict]:
-    """Every row of ``mode`` (``base`` or ``gpu19``) in both files."""
-    rows = []
-    for path in ROWS:
-        with gzip.open(path, "rt") as fh:
-            for group, sel in json.load(fh).items():
-                if f"_{mode}" in group:
-                    rows.extend(sel)
-    return rows
+    """The valid rows of ``mode`` (``base`` or ``gpu19``) in both files."""
+    return [r for path in ROWS for r in floor_s33.valid_rows(path, mode)]
 
 
 def counts(rows: list[dict], floor: float) -> dict[str, int]:
-    kept = [r for r in rows if r["valid"] and _f(r, "confidence") >= floor]
-    e_t = [_f(r, "e_t") for r in kept]
-    e_R = [_f(r, "e_R") for r in kept]
-    return {"frames": len(rows), "valid": len(kept),
-            "wrong": sum(t > 0.5 or a > 20.0 for t, a in zip(e_t, e_R)),
-            "rotated": sum(a > 20.0 for a in e_R), "flips": sum(a > 90.0 for a in e_R),
-            "within": sum(t <= 0.10 and a <= 2.0 for t, a in zip(e_t, e_R))}
+    """Session 33's counts of ``rows`` with the poses under ``floor`` turned invalid."""
+    return judge.s33.counts(judge.floored(rows, floor))
 
 
 def main() -> int:

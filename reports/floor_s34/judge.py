@@ -127,19 +127,23 @@ def report(rows: dict[str, list[dict]]) -> dict[str, dict[str, dict]]:
     return out
 
 
+def print_wrong(label: str, width: int, keyed: list[tuple[str, dict]]) -> None:
+    """One line per wrong valid pose of ``keyed`` (where, row), labelled ``label`` padded to ``width``."""
+    for where, r in keyed:
+        if r["valid"] and s33.wrong(r):
+            print(f"  {label:<{width}}{where:<8}{r['frame']}  e_R {r['e_R']:6.1f}  e_t {r['e_t']:.2f}  "
+                  f"{r.get('decided_by') or '-':<12}chamfer {r['outline_chamfer_px']:.2f}  "
+                  f"confidence {r['confidence']:.3f}")
+
+
 def details(rows: dict[str, list[dict]]) -> None:
     """The wrong poses of both bundles, the candidate's confidence against its hit rate, the floor's refusals in
     sequences, per regime."""
     print("wrong valid poses (set, frame, e_R, e_t, route, chamfer, confidence):")
     for m in MODES:
         for name in list(SETS) + ["seq"]:
-            keyed = ([(f"{name}", r) for r in rows[f"{name}_{m}"]] if name in SETS else
-                     [(n, r) for n, *_ in seqs.sequences("check") for r in rows[f"seq_{m}_{n}"]])
-            for where, r in keyed:
-                if r["valid"] and s33.wrong(r):
-                    print(f"  {LABELS[m]:<10}{where:<8}{r['frame']}  e_R {r['e_R']:6.1f}  e_t {r['e_t']:.2f}  "
-                          f"{r.get('decided_by') or '-':<12}chamfer {r['outline_chamfer_px']:.2f}  "
-                          f"confidence {r['confidence']:.3f}")
+            print_wrong(LABELS[m], 10, [(name, r) for r in rows[f"{name}_{m}"]] if name in SETS else
+                        [(n, r) for n, *_ in seqs.sequences("check") for r in rows[f"seq_{m}_{n}"]])
     print()
     print("confidence of valid poses against the share within the bar (pooled):")
     for m in MODES:
@@ -236,11 +240,7 @@ def round2(runs: Path) -> int:
     for m in modes:
         keyed = [(name, r) for name in SETS2 for r in rows[f"{name}_{m}"]]
         keyed += [(n, r) for n in seq2 + (seq1 if m == "floor" else []) for r in rows[f"seq_{m}_{n}"]]
-        for where, r in keyed:
-            if r["valid"] and s33.wrong(r):
-                print(f"  {labels[m]:<16}{where:<8}{r['frame']}  e_R {r['e_R']:6.1f}  e_t {r['e_t']:.2f}  "
-                      f"{r.get('decided_by') or '-':<12}chamfer {r['outline_chamfer_px']:.2f}  "
-                      f"confidence {r['confidence']:.3f}")
+        print_wrong(labels[m], 16, keyed)
     print()
     for m in modes:
         seq = group["seq"](m) + group["seq2"](m)
