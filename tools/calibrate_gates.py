@@ -39,7 +39,9 @@ classifier gives it at least ``decide_prob`` (the winner within the classifier's
 image vote against it), or for the winner's flip when it gives the winner at most ``1 - decide_prob``
 (the flip's fit is taken as the winner's chamfer plus the margin; no usable image vote for the winner).
 A row's outcome for the flip is read from the winner's: a flip when the winner was right, its error up to
-the flip (``e_R_sym``) when the winner was a flip.
+the flip (``e_R_sym``) when the winner was a flip. ``--flip-max-tau`` and ``--flip-max-polish`` replay the
+classifier's ``max_depth_tolerance_m`` and ``max_polish_deg``: it decides no frame over either. The table also
+counts the kept poses within the pose bar (0.10 m and 2 degrees).
 """
 
 from __future__ import annotations
@@ -55,6 +57,10 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from spacepose.tools.eval_pose import FLIP_DEG
+
+#: the pose bar of issue 6 (e_t and e_R of a pose "within the bar"), counted by :func:`flip_gate_table`
+WITHIN_T_M = 0.10
+WITHIN_R_DEG = 2.0
 
 __all__ = ["gate_table", "outline_gate_table", "image_gate_table", "flip_gate_table", "propose", "propose_outline",
            "propose_image", "propose_flip", "main"]
@@ -163,10 +169,15 @@ def image_gate_table(rows: Iterable[dict[str, Any]], max_chamfer_px: float, min_
 def flip_gate_table(rows: Iterable[dict[str, Any]], decides: Sequence[float], vetoes: Sequence[float],
                     chamfers: Sequence[float], *, max_chamfer_px: float, min_margin_px: float, image_margin: float,
                     image_score: float, image_pixels: int, image_veto: float, image_chamfer: float, flip_pixels: int,
-                    max_background: float, max_e_t: float, max_e_r: float) -> list[dict[str, float]]:
+                    max_background: float, max_e_t: float, max_e_r: float, max_depth_tolerance_m: float = 0.0,
+                    max_polish_deg: float = 0.0) -> list[dict[str, float]]:
     """One row per (decide_prob, veto_prob, max_chamfer_px) of the flip classifier (module docstring): kept
-    poses, how many the classifier decides and vetoes, flips and wrong poses among the kept, mean errors of
-    the kept poses that are not flips."""
+    poses, how many the classifier decides and vetoes, flips and wrong poses among the kept, how many kept poses
+    are within the pose bar (``WITHIN_T_M``, ``WITHIN_R_DEG``), mean errors of the kept poses that are not flips.
+    ``max_depth_tolerance_m`` and ``max_polish_deg`` (0: off) are the classifier's own limits
+    (:class:`spacepose.flip_classifier.FlipClassifierConfig`): it decides no frame whose ``depth_tolerance_m`` is above
+    the first (or missing) nor one whose ``polish_deg`` is above the second (or missing; the winner's polish stands in
+    for its flip's)."""
     ok = [r for r in rows if r.get("valid") and math.isfinite(_finite(r.get("flip_prob")))]
     prob = np.array([_finite(r.get("flip_prob")) for r in ok])
     chamfer = np.nan_to_num(np.array([_finite(r.get("outline_chamfer_px")) for r in ok]), nan=np.inf)
@@ -187,11 +198,18 @@ def flip_gate_table(rows: Iterable[dict[str, Any]], decides: Sequence[float], ve
     by_image = ((chamfer <= max(max_chamfer_px, image_chamfer)) & usable & ~veto_image & apart
                 & (margin >= image_margin) & (s >= image_score))
     decided = by_margin | by_image
+    may_decide = np.ones(len(ok), dtype=bool)
+    if max_depth_tolerance_m > 0.0:
+        may_decide &= np.nan_to_num(np.array([_finite(r.get("depth_tolerance_m")) for r in ok]), nan=np.inf
+                                    ) <= max_depth_tolerance_m
+    if max_polish_deg > 0.0:
+        may_decide &= np.nan_to_num(np.array([_finite(r.get("polish_deg")) for r in ok]), nan=np.inf) <= max_polish_deg
     table = []
     for d, v, c in itertools.product(decides, vetoes, chamfers):
         vetoed = decided & (prob <= v)
-        for_best = ~decided & apart & (chamfer <= c) & (prob >= d) & ~veto_image
-        for_other = ~decided & apart & (chamfer + margin <= c) & (prob <= 1.0 - d) & ~(usable & (s >= -image_veto))
+        for_best = ~decided & may_decide & apart & (chamfer <= c) & (prob >= d) & ~veto_image
+        for_other = (~decided & may_decide & apart & (chamfer + margin <= c) & (prob <= 1.0 - d)
+                     & ~(usable & (s >= -image_veto)))
         kept_best = (decided & ~vetoed) | for_best
         kept = kept_best | for_other
         flips = (kept_best & flip) | (for_other & flip_of_other)
@@ -199,10 +217,11 @@ def flip_gate_table(rows: Iterable[dict[str, Any]], decides: Sequence[float], ve
         good = kept & ~flips
         err_t = np.where(good, e_t, np.nan)
         err_r = np.where(kept_best & good, e_r, np.where(for_other & good, e_sym, np.nan))
+        within = good & (np.nan_to_num(err_t, nan=np.inf) <= WITHIN_T_M) & (np.nan_to_num(err_r, nan=np.inf) <= WITHIN_R_DEG)
         table.append({"decide_prob": float(d), "veto_prob": float(v), "max_chamfer_px": float(c),
                       "kept": int(kept.sum()), "decided": int((for_best | for_other).sum()),
                       "for_flip": int(for_other.sum()), "vetoed": int(vetoed.sum()), "flips": int(flips.sum()),
-                      "wrong": int(bad.sum()),
+                      "wrong": int(bad.sum()), "within": int(within.sum()),
                       "e_t_mean": float(np.nanmean(err_t)) if good.any() else float("nan"),
                       "e_R_mean": float(np.nanmean(err_r)) if good.any() else float("nan")})
     return table
@@ -272,6 +291,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--veto", type=float, default=0.0, help="--flip: the bundle's image_veto_score")
     p.add_argument("--image-chamfer", type=float, default=2.0, help="--flip: the bundle's image_max_chamfer_px")
     p.add_argument("--flip-min-pixels", type=int, default=16, help="--flip: the bundle's min_flip_pixels")
+    p.add_argument("--flip-max-tau", type=float, default=0.0,
+                   help="--flip: the classifier's max_depth_tolerance_m (0: no limit)")
+    p.add_argument("--flip-max-polish", type=float, default=0.0,
+                   help="--flip: the classifier's max_polish_deg (0: no limit)")
     args = p.parse_args(argv)
     reports = [json.loads(gzip.decompress(path.read_bytes()) if path.suffix == ".gz" else path.read_text())
                for path in args.report]
@@ -365,19 +388,22 @@ def _main_flip(args: argparse.Namespace, report: dict[str, Any], rows: list[dict
              "max_background": args.background}
     table = flip_gate_table(rows, args.decides or [0.9, 0.95, 0.97, 0.99, 0.995],
                             args.flip_vetoes or [-1.0, 0.01, 0.05, 0.1, 0.2], args.flip_chamfers or [1.5, 2.0, 2.5, 3.0],
-                            max_e_t=args.max_e_t, max_e_r=args.max_e_r, **fixed)
+                            max_e_t=args.max_e_t, max_e_r=args.max_e_r, **fixed,
+                            max_depth_tolerance_m=args.flip_max_tau, max_polish_deg=args.flip_max_polish)
     best = propose_flip(table)
     scored = sum(1 for r in rows if r.get("valid") and math.isfinite(_finite(r.get("flip_prob"))))
     print(f"{scored} of {len(rows)} {report.get('split')} frames with a pose and a classifier score (gates open)")
     print("| decide_prob | veto_prob | max_chamfer_px | kept | decided by it | for the flip | vetoed | flips | wrong "
-          "| e_t mean m | e_R mean ° |\n|---|---|---|---|---|---|---|---|---|---|---|")
+          "| within | e_t mean m | e_R mean ° |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table:
         print(f"| {r['decide_prob']:.3f} | {r['veto_prob']:.2f} | {r['max_chamfer_px']:.1f} | {r['kept']} | {r['decided']} "
-              f"| {r['for_flip']} | {r['vetoed']} | {r['flips']} | {r['wrong']} | {r['e_t_mean']:.3f} | {r['e_R_mean']:.2f} |")
+              f"| {r['for_flip']} | {r['vetoed']} | {r['flips']} | {r['wrong']} | {r['within']} | {r['e_t_mean']:.3f} "
+              f"| {r['e_R_mean']:.2f} |")
     print("proposed:", "none (no setting keeps a pose without a flip)" if best is None else
           f"decide_prob {best['decide_prob']}, veto_prob {best['veto_prob']}, max_chamfer_px {best['max_chamfer_px']} "
           f"({best['kept']} poses kept, {best['decided']} decided by the classifier)")
-    _write_out(args, {"flip": True, **fixed}, table, best)
+    _write_out(args, {"flip": True, **fixed, "max_depth_tolerance_m": args.flip_max_tau,
+                      "max_polish_deg": args.flip_max_polish}, table, best)
     return 0
 
 

@@ -178,6 +178,31 @@ def test_flip_table_and_proposal(tmp_path, capsys):
     best = propose_flip(table)
     assert (best["decide_prob"], best["veto_prob"], best["max_chamfer_px"]) == (0.99, 0.05, 2.5)
     assert (best["kept"], best["flips"], best["wrong"]) == (4, 0, 0)
+    assert best["within"] == 0 and loose["within"] == 0     # every row is 0.2 m off
+    # within the bar (0.10 m, 2 deg) at 0.05 m: rows 1 and 6 (e_R 2.0), not row 3 (3.0) nor row 4's flip side
+    # (e_R_sym 4.0); the loose gates keep row 1, and row 2 only as a flip, which is never within
+    near = [{**r, "e_t": 0.05} for r in FLIP_ROWS]
+    by_near = {(r["decide_prob"], r["veto_prob"], r["max_chamfer_px"]): r for r in flip_gate_table(
+        near, [0.95, 0.99], [-1.0, 0.05], [1.5, 2.5], max_e_t=0.5, max_e_r=20.0, **fixed)}
+    assert by_near[(0.99, 0.05, 2.5)]["within"] == 2 and by_near[(0.95, -1.0, 1.5)]["within"] == 1
+    # the classifier's own limits: it decides no frame whose depth tolerance or polish is over them (or unknown);
+    # a frame the outline decides (row 1) is still kept
+    limited = [{**r, "depth_tolerance_m": 0.9 if i == 2 else 0.4, "polish_deg": None if i == 5 else 1.0}
+               for i, r in enumerate(FLIP_ROWS)]
+    by_lim = {(r["decide_prob"], r["veto_prob"], r["max_chamfer_px"]): r for r in flip_gate_table(
+        limited, [0.99], [0.05], [2.5], max_e_t=0.5, max_e_r=20.0, **fixed, max_depth_tolerance_m=0.7,
+        max_polish_deg=2.0)}
+    assert (by_lim[(0.99, 0.05, 2.5)]["kept"], by_lim[(0.99, 0.05, 2.5)]["decided"]) == (2, 1)  # rows 1 and 4's flip
+    unlimited = {(r["decide_prob"], r["veto_prob"], r["max_chamfer_px"]): r for r in flip_gate_table(
+        limited, [0.99], [0.05], [2.5], max_e_t=0.5, max_e_r=20.0, **fixed)}
+    assert unlimited[(0.99, 0.05, 2.5)]["kept"] == 4
+    capsys.readouterr()
+    (tmp_path / "lim.json").write_text(json.dumps({"split": "train", "frames": limited}))
+    assert main([str(tmp_path / "lim.json"), "--flip", "--decides", "0.99", "--flip-vetoes", "0.05", "--flip-chamfers",
+                 "2.5", "--flip-max-tau", "0.7", "--flip-max-polish", "2", "--out", str(tmp_path / "lim_out.json")]) == 0
+    lim_out = json.loads((tmp_path / "lim_out.json").read_text())
+    assert lim_out["max_depth_tolerance_m"] == 0.7 and lim_out["proposed"]["kept"] == 2
+    assert "| 0.990 | 0.05 | 2.5 | 2 | 1 |" in capsys.readouterr().out
     assert best["e_R_mean"] == pytest.approx((2.0 + 3.0 + 4.0 + 2.0) / 4)   # the flip's error is e_R_sym
     assert propose_flip([{**r, "flips": 1} for r in table]) is None
     report = tmp_path / "r.json"

@@ -1,0 +1,32 @@
+"""The sequences of session 35's check (reports/gates_s35/rule.txt).
+
+    python reports/gates_s35/sequences.py check [MODE ...]   # a render and an eval command per sequence and mode
+
+``check``: 12 sequences, seeds 3511-3522, rendered only after reports/gates_s35/rule.txt was committed. The grids
+(distance, regime, rate) are session 30's (reports/sequence_s30/sequences.py); 40 frames at 640x480 on the paper
+rig. MODE ``base`` evaluates with the shipped bundle, ``cand`` with /tmp/s35/bundles/cand (rule.txt says what it
+holds); reports go to ``runs/s35/<mode>_<name>.json``.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "sequence_s30"))
+import sequences as s30  # noqa: E402
+
+s30.SETS.setdefault("check_s35", (3511, 12, "seq_x"))
+
+
+def sequences(which: str = "check") -> list[tuple[str, int, int, str, int]]:
+    """(name, seed, distance, regime, rate) of every sequence of ``which`` (``check``)."""
+    return s30.sequences({"check": "check_s35"}[which])
+
+
+def main(argv: list[str]) -> int:
+    s30.print_commands(sequences(argv[0] if argv else "check"), argv[1:] or ["base"], "s35")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
