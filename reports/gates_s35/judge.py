@@ -18,18 +18,11 @@ from collections import Counter
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-
-
-def _load(name: str, path: Path):
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-seqs = _load("sequences_s35", HERE / "sequences.py")
-s34 = _load("judge_s34", HERE.parent / "floor_s34" / "judge.py")      # pose_rows, line, HEAD, print_wrong
+_SPEC = importlib.util.spec_from_file_location("judge_s34", HERE.parent / "floor_s34" / "judge.py")
+s34 = importlib.util.module_from_spec(_SPEC)                          # pose_rows, line, HEAD, print_wrong, _load
+_SPEC.loader.exec_module(s34)
 s33, pos32 = s34.s33, s34.pos32                                       # counts; position_table, print_table
+seqs = s34._load("sequences_s35", HERE / "sequences.py")
 
 MODES = ("base", "cand")
 LABELS = {"base": "shipped", "cand": "candidate"}
