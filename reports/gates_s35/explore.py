@@ -58,11 +58,27 @@ def open_rows(runs: Path) -> list[dict]:
     path = HERE / "open_rows.json.gz"
     files = [runs / s / "pose_eval.json" for s in STEMS]
     if all(f.is_file() for f in files):
-        rows = [{k: r.get(k) for k in KEYS} for f in files for r in json.loads(f.read_text())["frames"]]
-        with open(path, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
-            fh.write(json.dumps(rows).encode())
+        write_compact(path, [{k: r.get(k) for k in KEYS} for f in files for r in json.loads(f.read_text())["frames"]])
     with gzip.open(path, "rt") as fh:
         return json.load(fh)
+
+
+def _rounded(value):
+    """``value`` with every float rounded to 6 significant digits (lists and dicts walked)."""
+    if isinstance(value, float):
+        return float(f"{value:.6g}")
+    if isinstance(value, list):
+        return [_rounded(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _rounded(v) for k, v in value.items()}
+    return value
+
+
+def write_compact(path: Path, rows) -> None:
+    """Write ``rows`` as gzipped JSON (no timestamp), floats to 6 significant digits: the committed row files stay
+    small (the tracked tree must fit the device transfer, tests/runtime/test_package.py)."""
+    with open(path, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
+        fh.write(json.dumps(_rounded(rows)).encode())
 
 
 def floored(rows: list[dict]) -> list[dict]:

@@ -14,7 +14,9 @@ reproduce from the repository alone. Counts and tables: session 33's and 34's ju
 """
 from __future__ import annotations
 
+import gzip
 import importlib.util
+import json
 import sys
 from collections import Counter
 from pathlib import Path
@@ -25,6 +27,7 @@ s34 = importlib.util.module_from_spec(_SPEC)                          # pose_row
 _SPEC.loader.exec_module(s34)
 s33, pos32 = s34.s33, s34.pos32                                       # counts; position_table, print_table
 seqs = s34._load("sequences_s35", HERE / "sequences.py")
+explore = s34._load("explore_s35", HERE / "explore.py")             # write_compact
 
 LABELS = {"base": "shipped", "cand": "candidate", "cand2": "candidate 2"}
 #: per round: the sets (name: folder stems, what), the sequences, the candidate's mode, the rows file, the rule, the
@@ -45,7 +48,12 @@ def rows_of(runs: Path, rnd: dict) -> dict[str, list[dict]]:
     files = {f"{name}_{m}": [runs / f"{stem}_{m}" / "pose_eval.json" for stem in stems]
              for name, (stems, _) in rnd["sets"].items() for m in modes}
     files.update({f"seq_{m}_{n}": [runs / f"{m}_{n}.json"] for n in rnd["names"] for m in modes})
-    return s34.pose_rows(runs, HERE / rnd["rows"], files)
+    path = HERE / rnd["rows"]
+    rows = s34.pose_rows(runs, path, files)         # cut from the runs and written when they are all there
+    if all(f.is_file() for fs in files.values() for f in fs):
+        explore.write_compact(path, rows)
+    with gzip.open(path, "rt") as fh:                # the tables always come from the committed (compact) rows
+        return json.load(fh)
 
 
 def group(rows: dict[str, list[dict]], rnd: dict, name: str, mode: str) -> list[dict]:
