@@ -1,14 +1,15 @@
-"""The shipped bundle's confidence against the share of its valid poses within the bar, by distance (session 35).
+"""Session 34's bundle's confidence (its uncertainty and confidence constants are older than its stereo graph, and
+still shipped) against the share of its valid poses within the bar, by distance (session 35).
 
     python reports/gates_s35/confidence_by_distance.py
 
-Reads committed rows only: the shipped bundle's independent 640x480 frames of session 34's two check rounds
+Reads committed rows only: session 34's bundle's independent 640x480 frames of session 34's two check rounds
 (reports/floor_s34/rows.json.gz ``a_cand``, rows2.json.gz ``a2_cand``: this bundle, then the candidate) and of
-session 35's check (reports/gates_s35/rows.json.gz ``a_base``). Within: e_t <= 0.10 m and e_R <= 2 deg.
+session 35's round 1 (reports/gates_s35/rows.json.gz ``a_base``). Within: e_t <= 0.10 m and e_R <= 2 deg.
 
 Then the constants refitted on session 34's check runs (``REFIT``; reports/gates_s35/uncertainty_refit.txt), against
-the shipped ones: the confidence they give this check's valid poses (not in the fit), by distance, and what the
-floor (0.08) on each does to the shipped gates' replay on the open rows (explore.py). Both recompute the confidence
+the shipped ones: the confidence they give round 1's valid poses (not in the fit), by distance, and what the
+floor (0.08) on each does to session 34's gates' replay on the open rows (explore.py). Both recompute the confidence
 from the rows' distance (for the range to the target's centre), depth tolerance and outline chamfer; on the open rows
 that differs from the reported confidence by 0.0005 at the median.
 """
@@ -48,7 +49,7 @@ def main() -> int:
     d = np.array([r["distance"] for r in rows])
     conf = np.array([r["confidence"] for r in rows])
     e_t, e_r = np.array([r["e_t"] for r in rows]), np.array([r["e_R"] for r in rows])
-    print(f"{len(rows)} valid poses of the shipped bundle")
+    print(f"{len(rows)} valid poses of session 34's bundle")
     print("distance   poses  confidence  within  e_t<=0.10  e_R<=2")
     for lo, hi in BINS:
         s = (d >= lo) & (d < hi)
@@ -64,7 +65,7 @@ def main() -> int:
     w = np.array([r["e_t"] <= 0.10 and r["e_R"] <= 2.0 for r in held])
     conf = {name: np.array([confidence(r, *m) for r in held]) for name, m in models.items()}
     print()
-    print(f"this check's {len(held)} valid poses of the shipped bundle (not in the refit): Brier score "
+    print(f"round 1's {len(held)} valid poses of session 34's bundle (not in the refit): Brier score "
           + ", ".join(f"{name} {np.mean((c - w) ** 2):.4f}" for name, c in conf.items()))
     print("distance   poses  within  shipped  refit")
     for lo, hi in BINS:
@@ -74,7 +75,7 @@ def main() -> int:
     explore = _explore()
     raw = explore.open_rows(REPORTS / "gates_s35" / "no_runs")
     print()
-    print("the shipped gates replayed on the open rows (explore.py), the floor on each confidence:")
+    print("session 34's gates replayed on the open rows (explore.py), the floor on each confidence:")
     for name, m in models.items():
         rows = [dict(r, confidence=confidence(r, *m)) if r["valid"] else r for r in raw]
         cell = explore.table(explore.floored(rows), {k: (explore.SHIPPED[k],) for k in explore.GRID},

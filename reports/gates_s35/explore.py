@@ -32,7 +32,7 @@ KEYS = ("frame", "valid", "status", "e_t", "e_R", "e_R_sym", "confidence", "outl
         "outline_image_score", "outline_image_background", "outline_image_pixels", "flip_prob", "depth_tolerance_m",
         "polish_deg", "distance", "regime", "decided_by")
 STEMS = [f"open_{s}{k}" for s in "ac" for k in range(6)]
-#: the shipped gates (bundle.json, sessions 18-23)
+#: the gates shipped before session 35 (bundle.json, sessions 18-23; rule2.txt changed four of them)
 SHIPPED = {"max_chamfer_px": 1.5, "min_margin_px": 0.5, "image_margin": 0.2, "image_score": 0.1, "image_pixels": 16,
            "image_veto": 0.0, "image_chamfer": 2.0, "flip_pixels": 16, "max_background": 0.02,
            "decide_prob": 0.995, "veto_prob": 0.05, "flip_chamfer": 1.5}
