@@ -35,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="extra loss factor of target pixels near the silhouette (default 1: none)")
     parser.add_argument("--edge-radius", type=int, default=3,
                         help="silhouette band of --edge-weight, in pixels (default 3)")
+    parser.add_argument("--photometric", choices=("mild", "wide"), default="mild",
+                        help="photometric augmentation: mild per-view jitter (default), or wide: also one look per "
+                             "sample shared by both views (tone curve, tint, clipping exposure, blur)")
     add_loop_arguments(parser, workers=0)
 
 
@@ -64,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
                       limit=args.limit, oversample=dict(args.oversample),
                       init=str(args.init) if args.init else None, time_limit_s=args.time_limit_s,
                       pace_lr=args.pace_lr, target_weight=args.target_weight,
-                      edge_weight=args.edge_weight, edge_radius=args.edge_radius)
+                      edge_weight=args.edge_weight, edge_radius=args.edge_radius,
+                      photometric=args.photometric)
     if not args.target_weight > 0:
         raise SystemExit("--target-weight must be > 0")
     if not args.edge_weight > 0 or args.edge_radius < 1:

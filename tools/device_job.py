@@ -60,7 +60,8 @@ def job_commands(args: argparse.Namespace, work: Path) -> dict[str, list[list[st
                         "--batch", str(args.stereo_batch), "--train-crop", "160x160", "--init",
                         str(args.stereo_init or work / "init_stereo.pt"), "--lr", str(args.stereo_lr), "--workers",
                         str(stereo_workers), "--target-weight", str(args.target_weight), "--edge-weight",
-                        str(args.edge_weight), "--oversample", *args.stereo_oversample, *common)
+                        str(args.edge_weight), "--photometric", args.stereo_photometric, "--oversample",
+                        *args.stereo_oversample, *common)
     pose = _spacepose("train-pose", str(data), "--out", str(work / "pose"), "--steps", str(args.pose_steps),
                       "--batch", str(args.pose_batch), "--depth-source", "gt_noisy", "--init",
                       str(work / "init_pose.pt"), "--lr-min", "1e-5", "--lr-max", str(args.pose_lr_max),
@@ -148,6 +149,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "stereo_weights.pt carried along) instead of the bundle's graph")
     p.add_argument("--stereo-oversample", nargs="+", default=["mixed=3", "penumbra=2"],
                    help="train-stereo --oversample")
+    p.add_argument("--stereo-photometric", choices=("mild", "wide"), default="mild",
+                   help="train-stereo --photometric (wide: one look per sample shared by both views, session 36)")
     p.add_argument("--pose-lr-max", type=float, default=1e-3)
     p.add_argument("--target-weight", type=float, default=4.0)
     p.add_argument("--edge-weight", type=float, default=3.0, help="train-stereo --edge-weight (session 6's recipe)")

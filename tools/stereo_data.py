@@ -11,6 +11,9 @@ geometry as the flight runtime (``spacepose.roi``):
 Ground-truth disparity is resampled with nearest neighbour and multiplied by ``s``;
 ``valid = mask & d > 0`` after resampling. Photometric augmentation (train only): per-image
 (asymmetric) brightness, contrast and gamma, Gaussian noise, and occasional conversion to grey.
+With ``photometric="wide"`` each sample first gets one look shared by both views
+(:func:`wide_look`): a tone curve, a colour tint, an exposure gain that clips, and an optics blur,
+drawn wider than the renderer's own range so that another renderer's images fall inside it.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
+import cv2
 import numpy as np
 
 from spacepose import roi
@@ -30,6 +34,7 @@ from spacepose.tools.labels import FrameLabel, read_labels
 log = logging.getLogger(__name__)
 
 __all__ = ["FrameRecord", "read_labels", "StereoCropConfig", "StereoCropDataset", "photometric_augment",
+           "PHOTOMETRIC_MODES", "sample_wide_look", "wide_look",
            "oversample_records"]
 
 
@@ -59,6 +64,41 @@ class StereoCropConfig:
     #: None trains on the whole graph-sized sample. Matching is translation invariant, so smaller
     #: crops buy steps on a CPU without changing the disparity distribution the graph sees.
     train_crop: tuple[int, int] | None = None
+    #: "mild": the per-view jitter of :func:`photometric_augment` only (sessions 1-35); "wide": before it,
+    #: one look per sample shared by both views (:func:`wide_look`), with probability ``wide_prob``
+    photometric: str = "mild"
+    wide_prob: float = 0.8
+
+    def __post_init__(self) -> None:
+        if self.photometric not in PHOTOMETRIC_MODES:
+            raise ValueError(f"photometric must be one of {PHOTOMETRIC_MODES}, got {self.photometric!r}")
+        if not 0.0 <= self.wide_prob <= 1.0:
+            raise ValueError(f"wide_prob must be in [0, 1], got {self.wide_prob}")
+
+
+PHOTOMETRIC_MODES = ("mild", "wide")
+
+
+def sample_wide_look(rng: np.random.Generator) -> dict[str, Any]:
+    """One sample's look for :func:`wide_look`: tone-curve gamma log-uniform in 0.4-2.5, per-channel tint
+    0.75-1.25, exposure gain 0.5-1.8 (clipped at white), Gaussian blur sigma 0-1.5 px (none below 0.25)."""
+    return {"gamma": float(np.exp(rng.uniform(np.log(0.4), np.log(2.5)))),
+            "tint": rng.uniform(0.75, 1.25, size=3).astype(np.float32),
+            "gain": float(rng.uniform(0.5, 1.8)),
+            "blur_px": float(rng.uniform(0.0, 1.5))}
+
+
+def wide_look(image: np.ndarray, look: Mapping[str, Any]) -> np.ndarray:
+    """``image`` (H, W, 3) float32 in [0, 255] rendered in ``look`` (:func:`sample_wide_look`): another
+    renderer's tone mapping and colour balance, another exposure (what it pushes past white is lost), and
+    softer optics. Applied with the same look to both views of a sample; returns (H, W, 3) float32 in [0, 255]."""
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise DatasetError(f"wide_look takes (H, W, 3) images, got {image.shape}")
+    x = np.clip(image / 255.0, 0.0, 1.0) ** np.float32(look["gamma"])
+    x = np.clip(x * np.asarray(look["tint"], np.float32) * np.float32(look["gain"]), 0.0, 1.0)
+    if look["blur_px"] > 0.25:
+        x = cv2.GaussianBlur(x.astype(np.float32), (0, 0), float(look["blur_px"]))
+    return (x * 255.0).astype(np.float32)
 
 
 def photometric_augment(image: np.ndarray, rng: np.random.Generator, noise_sigma_max: float = 4.0) -> np.ndarray:
@@ -197,6 +237,9 @@ class StereoCropDataset:
         else:
             valid = mv & (dv > 0) & (dv < cfg.max_disp)
         if rng is not None and cfg.augment:
+            if cfg.photometric == "wide" and rng.random() < cfg.wide_prob:
+                look = sample_wide_look(rng)
+                lv, rv = wide_look(lv, look), wide_look(rv, look)
             lv = photometric_augment(lv, rng, cfg.noise_sigma_max)
             rv = photometric_augment(rv, rng, cfg.noise_sigma_max)
             if rng.random() < cfg.grey_prob:

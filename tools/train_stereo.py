@@ -77,6 +77,8 @@ class TrainConfig:
     #: extra factor for target pixels within ``edge_radius`` px of the silhouette (1: none)
     edge_weight: float = 1.0
     edge_radius: int = 3
+    #: photometric augmentation, :attr:`StereoCropConfig.photometric` ("mild" up to session 35, or "wide")
+    photometric: str = "mild"
     stereo: dict[str, Any] = field(default_factory=dict)  # StereoConfig overrides
 
     def stereo_config(self) -> StereoConfig:
@@ -86,7 +88,8 @@ class TrainConfig:
     def crop_config(self, augment: bool = True) -> StereoCropConfig:
         crop = tuple(self.train_crop) if (augment and self.train_crop) else None
         return StereoCropConfig(size=tuple(self.size), roi_prob=self.roi_prob,
-                                max_disp=float(self.stereo_config().max_disp), augment=augment, train_crop=crop)
+                                max_disp=float(self.stereo_config().max_disp), augment=augment, train_crop=crop,
+                                photometric=self.photometric)
 
 
 def build_model(config: StereoConfig) -> torch.nn.Module:

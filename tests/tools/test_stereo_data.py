@@ -4,7 +4,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from spacepose.errors import DatasetError  # noqa: E402
-from spacepose.tools.stereo_data import StereoCropConfig, StereoCropDataset, read_labels  # noqa: E402
+from spacepose.tools.stereo_data import (StereoCropConfig, StereoCropDataset, read_labels,  # noqa: E402
+                                         sample_wide_look, wide_look)
 
 
 def test_labels(synthetic_dataset):
@@ -89,3 +90,44 @@ def test_oversample_repeats_a_regime(synthetic_dataset):
         oversample_records(records, {"nosuchregime": 2})
     with pytest.raises(ValueError):
         oversample_records(records, {regime: 0})
+
+
+def test_wide_look_is_one_look_for_both_views_and_clips_like_an_exposure():
+    rng = np.random.default_rng(0)
+    image = rng.uniform(0, 255, size=(32, 40, 3)).astype(np.float32)
+    look = {"gamma": 0.5, "tint": np.array([1.2, 1.0, 0.8], np.float32), "gain": 1.8, "blur_px": 0.0}
+    a, b = wide_look(image, look), wide_look(image.copy(), look)
+    assert a.shape == image.shape and a.dtype == np.float32
+    assert np.array_equal(a, b)
+    assert float(a.min()) >= 0.0 and float(a.max()) <= 255.0
+    expect = np.clip((image / 255.0) ** 0.5 * look["tint"] * 1.8, 0.0, 1.0) * 255.0
+    np.testing.assert_allclose(a, expect, atol=1e-3)
+    assert (a[..., 0] >= 254.99).mean() > 0.5                     # the exposure pushes most of red past white
+    blurred = wide_look(image, {**look, "gain": 0.5, "blur_px": 1.5})
+    assert np.abs(np.diff(blurred, axis=1)).mean() < 0.5 * np.abs(np.diff(wide_look(image, {**look, "gain": 0.5}),
+                                                                           axis=1)).mean()
+    with pytest.raises(DatasetError):
+        wide_look(image[..., 0], look)
+
+
+def test_sample_wide_look_ranges():
+    rng = np.random.default_rng(3)
+    looks = [sample_wide_look(rng) for _ in range(400)]
+    gammas = np.array([lk["gamma"] for lk in looks])
+    assert 0.4 <= gammas.min() < 0.5 and 2.0 < gammas.max() <= 2.5
+    assert all(0.5 <= lk["gain"] <= 1.8 and 0.0 <= lk["blur_px"] <= 1.5 for lk in looks)
+    assert all(np.all((lk["tint"] >= 0.75) & (lk["tint"] <= 1.25)) for lk in looks)
+
+
+def test_wide_photometric_changes_samples_and_mild_is_the_default(synthetic_dataset):
+    assert StereoCropConfig().photometric == "mild"
+    with pytest.raises(ValueError, match="photometric"):
+        StereoCropConfig(photometric="loud")
+    mild = StereoCropDataset(synthetic_dataset, "train", StereoCropConfig(size=(64, 64)), seed=1)
+    wide = StereoCropDataset(synthetic_dataset, "train", StereoCropConfig(size=(64, 64), photometric="wide",
+                                                                         wide_prob=1.0), seed=1)
+    a, b = mild[2], wide[2]
+    assert torch.equal(a["disparity"], b["disparity"])            # the look never moves the geometry
+    assert not torch.equal(a["left"], b["left"])
+    assert float(b["left"].min()) >= 0 and float(b["left"].max()) <= 255
+    assert torch.equal(b["left"], wide[2]["left"])                # deterministic per epoch

@@ -1,3 +1,4 @@
+import dataclasses
 import json
 import shutil
 
@@ -217,3 +218,14 @@ def test_exported_graph_records_the_data_seed_not_the_training_seed(synthetic_da
     torch.save(old, tmp_path / "old.pt")
     meta = export_checkpoint(tmp_path / "old.pt", tmp_path / "b.onnx", iters=1, size=(64, 64), parity=False)["metadata"]
     assert "seed" not in meta["dataset"] and meta["dataset"]["training_seed"] == 7
+
+
+def test_photometric_mode_reaches_the_samples_and_old_configs_load():
+    cfg = TrainConfig(dataset="d", out="o", photometric="wide")
+    assert cfg.crop_config().photometric == "wide" and cfg.crop_config().augment
+    assert TrainConfig(dataset="d", out="o").crop_config().photometric == "mild"    # sessions 1-35's samples
+    old = dataclasses.asdict(TrainConfig(dataset="d", out="o"))
+    del old["photometric"]                                                          # a run's config.json before it
+    assert TrainConfig(**old).photometric == "mild"
+    with pytest.raises(ValueError, match="photometric"):
+        TrainConfig(dataset="d", out="o", photometric="loud").crop_config()
