@@ -43,7 +43,7 @@ def test_job_commands_budget_and_kinds(tmp_path):
     train = phases["train"][0]
     assert "train-stereo" in train and "--pace-lr" in train
     assert train[train.index("--workers") + 1] == "14"
-    assert train[train.index("--photometric") + 1] == "mild"
+    assert train[train.index("--photometric") + 1] == "wide"
     assert "export-stereo" in phases["export"][0] and phases["recover"][0][4].endswith("stereo.onnx")
     limited = _with_time_limit(train, 123.4)
     assert limited[limited.index("--time-limit-s") + 1] == "123" and len(limited) == len(train)
@@ -54,9 +54,9 @@ def test_job_commands_budget_and_kinds(tmp_path):
     resumed = job_commands(build_parser().parse_args(["--work", str(tmp_path), "--out", str(tmp_path / "o"),
                                                       "--kinds", "stereo", "--stereo-init", "w.pt",
                                                       "--stereo-oversample", "mixed=4",
-                                                      "--stereo-photometric", "wide"]), tmp_path)
+                                                      "--stereo-photometric", "mild"]), tmp_path)
     assert resumed["recover"] == []                        # carried weights: nothing to rebuild
     stereo = resumed["train"][0]
     assert stereo[stereo.index("--init") + 1] == "w.pt"
-    assert stereo[stereo.index("--photometric") + 1] == "wide"
+    assert stereo[stereo.index("--photometric") + 1] == "mild"
     assert stereo[stereo.index("--oversample") + 1:stereo.index("--oversample") + 3] == ["mixed=4", "--threads"]
