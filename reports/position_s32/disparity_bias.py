@@ -37,6 +37,27 @@ def frame_stats(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray) -> dict[str,
     return out
 
 
+def stereo_rows(dataset: Path, names: list[str], bundle: Path | None) -> list[dict]:
+    """Run ``spacepose disparity`` (one thread; the shipped bundle unless ``bundle``) on frames ``names`` of
+    ``dataset`` and return one row per frame: ``frame`` and :func:`frame_stats` against the rendered disparity."""
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        for side in ("left", "right"):
+            (work / side).mkdir()
+            for n in names:
+                (work / side / f"{n}.png").symlink_to((dataset / side / f"{n}.png").resolve())
+        if cli_main(["disparity", str(work), "--calib", str(dataset / "rig.yaml"), "--out", str(work / "pred"),
+                     "--threads", "1", *(["--bundle", str(bundle)] if bundle else [])]) != 0:
+            raise SystemExit("spacepose disparity failed")
+        rows = []
+        for n in names:
+            mask = read_image(dataset / "mask" / f"{n}.png")
+            mask = (mask[..., 0] if mask.ndim == 3 else mask) > 0
+            rows.append({"frame": n, **frame_stats(read_pfm(work / "pred" / f"{n}.pfm"),
+                                                     read_pfm(dataset / "disparity" / f"{n}.pfm"), mask)})
+    return rows
+
+
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dataset", nargs="?", type=Path, default=Path("data/tdrs640"))
@@ -46,21 +67,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--bundle", type=Path, default=None, help="model bundle folder (default: the shipped one)")
     args = ap.parse_args(argv)
     names = [f"{i:06d}" for i in range(args.first, args.first + args.count)]
-    with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
-        for side in ("left", "right"):
-            (work / side).mkdir()
-            for n in names:
-                (work / side / f"{n}.png").symlink_to((args.dataset / side / f"{n}.png").resolve())
-        if cli_main(["disparity", str(work), "--calib", str(args.dataset / "rig.yaml"), "--out", str(work / "pred"),
-                     "--threads", "1", *(["--bundle", str(args.bundle)] if args.bundle else [])]) != 0:
-            raise SystemExit("spacepose disparity failed")
-        rows = []
-        for n in names:
-            mask = read_image(args.dataset / "mask" / f"{n}.png")
-            mask = (mask[..., 0] if mask.ndim == 3 else mask) > 0
-            rows.append({"frame": n, **frame_stats(read_pfm(work / "pred" / f"{n}.pfm"),
-                                                     read_pfm(args.dataset / "disparity" / f"{n}.pfm"), mask)})
+    rows = stereo_rows(args.dataset, names, args.bundle)
     print(f"{'frame':<8}{'gt px':>7}{'interior mean':>15}{'median':>9}{'rim mean':>10}{'median':>9}")
     for r in rows:
         print(f"{r['frame']:<8}{r['gt_mean_px']:>7.1f}{r['interior_mean_px']:>+15.3f}{r['interior_median_px']:>+9.3f}"

@@ -14,6 +14,8 @@ import math
 import sys
 from pathlib import Path
 
+from spacepose.tools.calibrate_gates import WITHIN_R_DEG, WITHIN_T_M
+
 
 def load(path: str) -> dict[str, dict]:
     p = Path(path)
@@ -26,7 +28,7 @@ def wrong(r: dict) -> bool:
 
 
 def within(r: dict) -> bool:
-    return bool(r["valid"]) and r["e_R"] <= 2.0 and r["e_t"] <= 0.10
+    return bool(r["valid"]) and r["e_R"] <= WITHIN_R_DEG and r["e_t"] <= WITHIN_T_M
 
 
 def main(argv: list[str]) -> None:

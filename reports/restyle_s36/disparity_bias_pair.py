@@ -5,7 +5,7 @@
 Takes the first ``count`` frames of RESTYLED's ``labels.jsonl`` (made by ``python -m spacepose.tools.restyle PLAIN
 RESTYLED --seed S --split test``), runs ``spacepose disparity`` (the whole runtime stereo stage) on them in both
 datasets, and compares each map with the rendered disparity over the target's interior and rim
-(``reports/position_s32/disparity_bias.py``'s ``frame_stats``). Prints per-frame rows with the frame's style and
+(``reports/position_s32/disparity_bias.py``'s ``stereo_rows``). Prints per-frame rows with the frame's style and
 pooled medians, and writes them as JSON (default ``reports/restyle_s36/disparity_bias_pair.json``).
 """
 from __future__ import annotations
@@ -14,37 +14,14 @@ import argparse
 import importlib.util
 import json
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
-
-from spacepose.cli import main as cli_main
-from spacepose.imageio import read_image, read_pfm
 
 _spec = importlib.util.spec_from_file_location("disparity_bias_s32",
                                                Path(__file__).resolve().parents[1] / "position_s32/disparity_bias.py")
 _s32 = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_s32)
-
-
-def run(dataset: Path, names: list[str], bundle: Path | None) -> list[dict]:
-    with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
-        for side in ("left", "right"):
-            (work / side).mkdir()
-            for n in names:
-                (work / side / f"{n}.png").symlink_to((dataset / side / f"{n}.png").resolve())
-        if cli_main(["disparity", str(work), "--calib", str(dataset / "rig.yaml"), "--out", str(work / "pred"),
-                     "--threads", "1", *(["--bundle", str(bundle)] if bundle else [])]) != 0:
-            raise SystemExit("spacepose disparity failed")
-        rows = []
-        for n in names:
-            mask = read_image(dataset / "mask" / f"{n}.png")
-            mask = (mask[..., 0] if mask.ndim == 3 else mask) > 0
-            rows.append({"frame": n, **_s32.frame_stats(read_pfm(work / "pred" / f"{n}.pfm"),
-                                                          read_pfm(dataset / "disparity" / f"{n}.pfm"), mask)})
-    return rows
 
 
 def main(argv: list[str]) -> int:
@@ -58,7 +35,8 @@ def main(argv: list[str]) -> int:
     labels = [json.loads(x) for x in (args.restyled / "labels.jsonl").read_text().splitlines() if x.strip()]
     labels = labels[: args.count]
     names = [d["frame"] for d in labels]
-    plain, rest = run(args.plain, names, args.bundle), run(args.restyled, names, args.bundle)
+    plain = _s32.stereo_rows(args.plain, names, args.bundle)
+    rest = _s32.stereo_rows(args.restyled, names, args.bundle)
     print(f"{'frame':<8}{'gt px':>7}{'plain int':>10}{'restyled':>10}{'plain rim':>10}{'restyled':>10}  style")
     rows = []
     for d, p, q in zip(labels, plain, rest):
