@@ -3,7 +3,8 @@
 ``python reports/restyle_s36/by_style.py PLAIN_REPORT RESTYLED_REPORT RESTYLED_DATASET``
 (reports are ``pose_eval.json[.gz]`` of ``spacepose eval-pose``; the dataset's ``labels.jsonl`` holds the styles).
 Prints, per factor tercile: frames, valid plain -> restyled, wrong (> 20 deg or > 0.5 m) plain -> restyled,
-and the frames' decision routes and refusal statuses that changed.
+and the frames' decision routes and refusal statuses that changed; then the restyled report's wrong poses (range
+error in range sigmas) and the outline chamfer of the poses the restyle lost.
 """
 from __future__ import annotations
 
@@ -67,6 +68,18 @@ def main(argv: list[str]) -> None:
     status_p = collections.Counter(r["status"] for r in P); status_q = collections.Counter(r["status"] for r in Q)
     print("\nstatus plain:", dict(status_p.most_common()))
     print("status restyled:", dict(status_q.most_common()))
+    print("\nwrong in the restyled report: frame, distance m, e_t m, range error / sigma_range, e_R deg, confidence")
+    for f in frames:
+        r = rest[f]
+        if wrong(r):
+            print(f"  {f} {r['distance']:.1f} {r['e_t']:.2f} {r['e_pos_los'] / r['sigma_range_m']:+.1f} "
+                  f"{r['e_R']:.1f} {r['confidence']:.2f}")
+    lost_chamfer = sorted((plain[f]["outline_chamfer_px"], rest[f]["outline_chamfer_px"]) for f in frames
+                          if plain[f]["valid"] and not rest[f]["valid"])
+    fin = [(a, b) for a, b in lost_chamfer if math.isfinite(b)]
+    print(f"\nlost poses' outline chamfer px, plain -> restyled ({len(fin)} of {len(lost_chamfer)} with one): median "
+          f"{sorted(a for a, _ in fin)[len(fin) // 2]:.2f} -> {sorted(b for _, b in fin)[len(fin) // 2]:.2f}, "
+          f"restyled over 2.5 px: {sum(b > 2.5 for _, b in fin)}")
 
 
 if __name__ == "__main__":
