@@ -76,8 +76,10 @@ WRONG_T_M, WRONG_R_DEG = 0.5, 20.0
 @dataclass(frozen=True)
 class Choice:
     """What :func:`choose` found: the ``reference`` and ``chosen`` cells with their counts (``kept``, ``within``,
-    ``wrong``, ``flips``, ...), the number of ``safe`` cells, the ``top`` safe cells, and whether the classifier's
-    gates were allowed to loosen."""
+    ``wrong``, ``flips``, ...), the number of ``safe`` cells, the ``top`` safe cells, whether the classifier's
+    gates were allowed to loosen, and whether the chosen cell is safe itself (``chosen_safe``: not so when the
+    reference's gates are kept but, on another graph's rows, keep a flip or more wrong poses than the reference;
+    such a graph should not ship with them)."""
 
     reference: dict[str, Any]
     chosen: dict[str, Any]
@@ -85,6 +87,7 @@ class Choice:
     cells: int
     top: list[dict[str, Any]]
     classifier_may_loosen: bool
+    chosen_safe: bool = True
 
     @property
     def changed(self) -> dict[str, tuple[float, float]]:
@@ -222,7 +225,7 @@ def choose(rows: Sequence[dict[str, Any]], bundle: str | Path, *, reference_rows
     gains = bool(safe) and safe[0]["within"] > ref["within"] and safe[0]["within"] >= (1.0 + min_gain) * ref["within"]
     chosen = safe[0] if gains else dict(same or ref)
     return Choice(reference=ref, chosen=chosen, safe=len(safe), cells=len(table), top=safe[:top],
-                  classifier_may_loosen=may_loosen)
+                  classifier_may_loosen=may_loosen, chosen_safe=ok(chosen))
 
 
 def write_candidate(bundle: str | Path, dst: str | Path, choice: Choice) -> Path:
@@ -273,10 +276,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     for r in choice.top:
         print(_line(r))
     print(f"chosen:\n{_line(choice.chosen)}\nmoved: {choice.changed or 'nothing'}")
+    if not choice.chosen_safe:
+        print("warning: the chosen gates keep a flip or more wrong poses than the reference on these rows")
     if args.out is not None:
         args.out.write_text(json.dumps({"reference": choice.reference, "chosen": choice.chosen, "safe": choice.safe,
                                         "cells": choice.cells, "top": choice.top, "changed": choice.changed,
-                                        "classifier_may_loosen": choice.classifier_may_loosen}, indent=1) + "\n")
+                                        "classifier_may_loosen": choice.classifier_may_loosen,
+                                        "chosen_safe": choice.chosen_safe}, indent=1) + "\n")
     return 0
 
 

@@ -93,6 +93,13 @@ def test_small_gains_keep_the_reference_and_errors(tmp_path):
     choice = choose(few, b)
     assert choice.chosen["min_margin_px"] == 1.0 and choice.changed == {}
     assert choose(few, b, min_gain=0.0).chosen["min_margin_px"] == 0.7
+    assert choice.chosen_safe
+    # another graph's rows with a wrong pose every cell but the strictest keeps: nothing safe gains, the reference's
+    # gates stay, and the choice says they are not safe for this graph
+    bad = [pose(2.0) for _ in range(10)] + [pose(2.0, e_t=0.9)]
+    unsafe = choose(bad, b, reference_rows=[pose(2.0) for _ in range(10)])
+    assert unsafe.reference["wrong"] == 0 and unsafe.chosen["wrong"] == 1 and not unsafe.chosen_safe
+    assert unsafe.changed == {}
     with pytest.raises(DatasetError, match="open rows"):
         choose([{"valid": False}], b)
     with pytest.raises(BundleError, match="not a bundle"):
