@@ -15,14 +15,16 @@ and so that the same rule serves every new graph:
    not chosen: session 35's round 1 failed that way).
 4. The flip classifier's gates may only be tightened unless there are at least ``--classifier-rows`` rows
    (default 4,000): far-off poses come about once per thousand frames, and loosening them let one through in
-   session 35.
+   session 35. The same holds for the outline route's margin (``--margin-rows``, default 4,000; session 37 added
+   this after a margin of 0.2 px, chosen on 1,620 rows, let a 179.9° flip through on fresh frames; ``--margin-rows
+   0`` gives the choices of ``reports/wide_s37``).
 5. The chosen cell is the safe one with the most poses within the bar (0.10 m and 2°), then the most kept, then the
    fewest wrong, then the nearest to the reference (fewest gates moved, then fewest grid steps). Unless it has more
    within than the reference by at least ``--min-gain`` (default 3 %), the reference is kept: a gain smaller than
    that is noise on a few thousand rows.
 
 ``python -m spacepose.tools.choose_gates ROWS... --bundle B [--reference-rows ROWS...] [--out choice.json]
-[--min-gain 0.03] [--write-bundle DST]``
+[--margin-rows 4000] [--min-gain 0.03] [--write-bundle DST]``
 
 The replay models the outline, image and classifier routes of a decision (not tracking, the polish caps or the
 registration's own decision, which the open bundle closes), so the counts it predicts need the check on fresh frames.
@@ -44,7 +46,7 @@ from spacepose.errors import BundleError, DatasetError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["GRID", "BUNDLE_KEYS", "CLASSIFIER_GATES", "Choice", "load_rows", "reference_gates", "floored",
+__all__ = ["GRID", "BUNDLE_KEYS", "CLASSIFIER_GATES", "MARGIN_GATES", "Choice", "load_rows", "reference_gates", "floored",
            "replay", "choose", "write_candidate", "main"]
 
 #: cell key -> (bundle.json section, key)
@@ -65,6 +67,8 @@ GRID: Mapping[str, tuple[float, ...]] = {
 }
 #: the classifier's gates, and the direction that tightens each (+1: a larger value decides fewer frames)
 CLASSIFIER_GATES: Mapping[str, int] = {"decide_prob": +1, "veto_prob": +1, "flip_chamfer": -1}
+#: the outline route's margin, and the direction that tightens it
+MARGIN_GATES: Mapping[str, int] = {"min_margin_px": +1}
 #: fixed for the replay, from the bundle: (cell key, section, key, default)
 _FIXED = (("image_pixels", "silhouette", "image_min_pixels", 16), ("flip_pixels", "silhouette", "min_flip_pixels", 16),
           ("max_background", "silhouette", "image_max_background", 0.02),
@@ -77,7 +81,8 @@ WRONG_T_M, WRONG_R_DEG = 0.5, 20.0
 class Choice:
     """What :func:`choose` found: the ``reference`` and ``chosen`` cells with their counts (``kept``, ``within``,
     ``wrong``, ``flips``, ...), the number of ``safe`` cells, the ``top`` safe cells, whether the classifier's
-    gates were allowed to loosen, and whether the chosen cell is safe itself (``chosen_safe``: not so when the
+    gates (and the outline margin: ``margin_may_loosen``) were allowed to loosen, and whether the chosen cell is
+    safe itself (``chosen_safe``: not so when the
     reference's gates are kept but, on another graph's rows, keep a flip or more wrong poses than the reference;
     such a graph should not ship with them)."""
 
@@ -88,6 +93,7 @@ class Choice:
     top: list[dict[str, Any]]
     classifier_may_loosen: bool
     chosen_safe: bool = True
+    margin_may_loosen: bool = True
 
     @property
     def changed(self) -> dict[str, tuple[float, float]]:
@@ -167,20 +173,21 @@ def replay(rows: Sequence[dict[str, Any]], values: Mapping[str, Sequence[float]]
     return out
 
 
-def _values(reference: Mapping[str, float], classifier_may_loosen: bool, grid: Mapping[str, Sequence[float]]
+def _values(reference: Mapping[str, float], fixed_directions: Mapping[str, int], grid: Mapping[str, Sequence[float]]
             ) -> dict[str, list[float]]:
+    """Each gate's values: ``grid``'s and the reference's; a gate of ``fixed_directions`` only at the reference's
+    value or tighter (the direction's sign)."""
     values = {}
     for gate in GRID:
         vals = sorted(set(grid[gate]) | {reference[gate]})
-        if gate in CLASSIFIER_GATES and not classifier_may_loosen:
-            sign = CLASSIFIER_GATES[gate]
-            vals = [v for v in vals if sign * (v - reference[gate]) >= 0]
+        if gate in fixed_directions:
+            vals = [v for v in vals if fixed_directions[gate] * (v - reference[gate]) >= 0]
         values[gate] = vals
     return values
 
 
 def choose(rows: Sequence[dict[str, Any]], bundle: str | Path, *, reference_rows: Sequence[dict[str, Any]] | None = None,
-           classifier_rows: int = 4000, min_gain: float = 0.03, top: int = 20,
+           classifier_rows: int = 4000, margin_rows: int = 4000, min_gain: float = 0.03, top: int = 20,
            grid: Mapping[str, Sequence[float]] | None = None) -> Choice:
     """The rule of the module docstring on ``rows`` (open rows of the candidate graph) for ``bundle``'s gates, over
     ``grid`` (default :data:`GRID`; gate -> values, the reference's value added to each)."""
@@ -196,7 +203,8 @@ def choose(rows: Sequence[dict[str, Any]], bundle: str | Path, *, reference_rows
         raise BundleError(f"{bundle}: silhouette.image_veto_score must be under image_min_score")
     ref = replay(ref_rows, {n: (reference[n],) for n in GRID}, fixed)[0]
     may_loosen = len(rows) >= classifier_rows
-    values = _values(reference, may_loosen, grid)
+    tighten_only = {**({} if may_loosen else CLASSIFIER_GATES), **({} if len(rows) >= margin_rows else MARGIN_GATES)}
+    values = _values(reference, tighten_only, grid)
     names = list(GRID)
     table = replay(rows, values, fixed)
     index = {tuple(r[n] for n in names): r for r in table}
@@ -225,7 +233,8 @@ def choose(rows: Sequence[dict[str, Any]], bundle: str | Path, *, reference_rows
     gains = bool(safe) and safe[0]["within"] > ref["within"] and safe[0]["within"] >= (1.0 + min_gain) * ref["within"]
     chosen = safe[0] if gains else dict(same or ref)
     return Choice(reference=ref, chosen=chosen, safe=len(safe), cells=len(table), top=safe[:top],
-                  classifier_may_loosen=may_loosen, chosen_safe=ok(chosen))
+                  classifier_may_loosen=may_loosen, chosen_safe=ok(chosen),
+                  margin_may_loosen=len(rows) >= margin_rows)
 
 
 def write_candidate(bundle: str | Path, dst: str | Path, choice: Choice) -> Path:
@@ -255,6 +264,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="rows of the reference bundle's own open evaluation on the same frames")
     p.add_argument("--classifier-rows", type=int, default=4000,
                    help="rows needed before the classifier's gates may loosen")
+    p.add_argument("--margin-rows", type=int, default=4000,
+                   help="rows needed before the outline route's margin may loosen (0: always, as in session 37's rules)")
     p.add_argument("--min-gain", type=float, default=0.03,
                    help="relative gain in poses within the bar below which the reference is kept")
     p.add_argument("--out", type=Path, default=None, help="write the choice as JSON here")
@@ -265,14 +276,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         rows = load_rows(args.rows)
         ref_rows = load_rows(args.reference_rows) if args.reference_rows else None
         choice = choose(rows, args.bundle, reference_rows=ref_rows, classifier_rows=args.classifier_rows,
-                        min_gain=args.min_gain)
+                        margin_rows=args.margin_rows, min_gain=args.min_gain)
         if args.write_bundle is not None:
             write_candidate(args.bundle, args.write_bundle, choice)
     except (BundleError, DatasetError, OSError, json.JSONDecodeError) as exc:
         raise SystemExit(f"error: {exc}") from exc
     print("columns: " + "  ".join(GRID))
     print(f"reference ({'its own rows' if ref_rows is not None else 'these rows'}):\n{_line(choice.reference)}")
-    print(f"{choice.cells} cells, {choice.safe} safe; classifier gates may loosen: {choice.classifier_may_loosen}")
+    print(f"{choice.cells} cells, {choice.safe} safe; classifier gates may loosen: {choice.classifier_may_loosen}; "
+          f"outline margin may loosen: {choice.margin_may_loosen}")
     for r in choice.top:
         print(_line(r))
     print(f"chosen:\n{_line(choice.chosen)}\nmoved: {choice.changed or 'nothing'}")

@@ -19,7 +19,8 @@ SMALL = {**{k: (v[0],) for k, v in GRID.items()}, "min_margin_px": GRID["min_mar
 
 
 def choose(*args, **kwargs):
-    return choose_gates.choose(*args, grid=SMALL, **kwargs)
+    """The rule on the small grid, the outline margin free to loosen (``margin_rows`` 0) unless a test says."""
+    return choose_gates.choose(*args, grid=SMALL, **{"margin_rows": 0, **kwargs})
 
 GATES = {"silhouette": {"max_chamfer_px": 1.5, "min_margin_px": 1.0, "image_min_margin_px": 0.1,
                         "image_min_score": 0.1, "image_veto_score": -0.5, "image_max_chamfer_px": 2.0,
@@ -94,6 +95,10 @@ def test_small_gains_keep_the_reference_and_errors(tmp_path):
     assert choice.chosen["min_margin_px"] == 1.0 and choice.changed == {}
     assert choose(few, b, min_gain=0.0).chosen["min_margin_px"] == 0.7
     assert choice.chosen_safe
+    # on fewer rows than margin_rows the outline margin only tightens (session 37: 0.2 px let a flip through)
+    held = choose(few, b, min_gain=0.0, margin_rows=4000)
+    assert not held.margin_may_loosen and held.chosen["min_margin_px"] == 1.0
+    assert all(r["min_margin_px"] >= 1.0 for r in held.top)
     # another graph's rows with a wrong pose every cell but the strictest keeps: nothing safe gains, the reference's
     # gates stay, and the choice says they are not safe for this graph
     bad = [pose(2.0) for _ in range(10)] + [pose(2.0, e_t=0.9)]
@@ -121,7 +126,8 @@ def test_candidate_bundle_and_cli(tmp_path, capsys, monkeypatch):
     (tmp_path / "list.json").write_text(json.dumps(rows()))
     assert len(load_rows([path, tmp_path / "list.json"])) == 2 * len(rows())
     out, cand = tmp_path / "choice.json", tmp_path / "cand"
-    assert main([str(path), "--bundle", str(b), "--out", str(out), "--write-bundle", str(cand)]) == 0
+    assert main([str(path), "--bundle", str(b), "--out", str(out), "--write-bundle", str(cand),
+                 "--margin-rows", "0"]) == 0
     assert "moved: {'min_margin_px': (1.0, 0.7)}" in capsys.readouterr().out
     assert json.loads(out.read_text())["chosen"]["min_margin_px"] == 0.7
     doc, old = json.loads((cand / "bundle.json").read_text()), json.loads((b / "bundle.json").read_text())
