@@ -91,13 +91,18 @@ def job_commands(args: argparse.Namespace, work: Path) -> dict[str, list[list[st
     }
 
 
+def _eval_seed(args: argparse.Namespace) -> int:
+    """The evaluation frames' seed: ``--eval-seed``, else ``--data-seed`` + 1000."""
+    return args.data_seed + 1000 if args.eval_seed is None else args.eval_seed
+
+
 def eval_commands(args: argparse.Namespace, work: Path) -> dict[str, list[list[str]]]:
     """The evaluation's commands (``--eval-frames``): render fresh frames, restyle them (``--eval-restyle-seed``),
     then pose rows of the open candidate bundle (``work/eval/bundle_open``, :func:`_candidate_bundles`) on each set's
     train split, and the stereo metrics of the candidate on the plain set's test split."""
     ev = work / "eval"
     data, restyled = ev / "data", ev / "data_restyled"
-    seed = args.data_seed + 1000 if args.eval_seed is None else args.eval_seed
+    seed = _eval_seed(args)
     workers = str(args.render_workers if args.eval_workers is None else args.eval_workers)
 
     def pose(folder: Path, name: str) -> list[str]:
@@ -173,7 +178,7 @@ def _evaluate(args: argparse.Namespace, work: Path, out: Path, trained: Sequence
     stereo_path = ev / "stereo" / "stereo_eval.json"
     stereo = json.loads(stereo_path.read_text()) if stereo_path.is_file() else None
     doc = {"graphs_replaced": replaced, "bundle": str(args.bundle),
-           "eval_seed": args.data_seed + 1000 if args.eval_seed is None else args.eval_seed,
+           "eval_seed": _eval_seed(args),
            "restyle_seed": args.eval_restyle_seed, "plain": rows("plain"), "restyled": rows("restyled"),
            "stereo": {k: stereo.get(k) for k in ("ours", "sgbm", "frames")} if stereo else None}
     write_rows(doc, out / "eval.json.gz")
@@ -296,7 +301,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         codes = run_all(commands, logs, env) if name in ("train", "export") else [
             run_all([cmd], [path], env)[0] for cmd, path in zip(commands, logs)]
         seconds = time.perf_counter() - t0
-        tails = [path.read_text(errors="replace")[-1500:] for path in logs]
+        tails = [log_tail(path) for path in logs]
         report["phases"][name] = {"seconds": round(seconds, 1), "exit_codes": codes,
                                   "commands": [" ".join(c) for c in commands], "log_tails": tails}
         log.info("%s: %.0f s, exit codes %s", name, seconds, codes)

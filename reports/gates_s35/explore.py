@@ -25,6 +25,7 @@ import sys
 from pathlib import Path
 
 from spacepose.tools.calibrate_gates import flip_gate_table
+from spacepose.tools.shard_eval import compact
 
 HERE = Path(__file__).resolve().parent
 FLOOR = 0.08
@@ -63,22 +64,11 @@ def open_rows(runs: Path) -> list[dict]:
         return json.load(fh)
 
 
-def _rounded(value):
-    """``value`` with every float rounded to 6 significant digits (lists and dicts walked)."""
-    if isinstance(value, float):
-        return float(f"{value:.6g}")
-    if isinstance(value, list):
-        return [_rounded(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _rounded(v) for k, v in value.items()}
-    return value
-
-
 def write_compact(path: Path, rows) -> None:
     """Write ``rows`` as gzipped JSON (no timestamp), floats to 6 significant digits: the committed row files stay
     small (the tracked tree must fit the device transfer, tests/runtime/test_package.py)."""
     with open(path, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
-        fh.write(json.dumps(_rounded(rows)).encode())
+        fh.write(json.dumps(compact(rows)).encode())
 
 
 def floored(rows: list[dict]) -> list[dict]:
