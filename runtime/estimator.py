@@ -731,7 +731,7 @@ class PoseEstimator:
             position = range_debiased(R_c @ bundle.centre + t_c, reg.tau_m, config.position_range_bias_outline
                                       if fits else config.position_range_bias_registered)
             factors.update(zip(_POSITION_KEYS, (float(v) for v in position)))
-        flip_p = self._flip_probability(outline, stereo, left_r, timer)
+        flip_p, flip_views = self._flip_probability(outline, stereo, left_r, timer)
         if flip_p is not None:
             factors["flip_prob"] = flip_p
             fc = bundle.flip_classifier
@@ -743,7 +743,7 @@ class PoseEstimator:
                 return _stage_invalid(stage, "weak_votes", factors), (
                     f"the outline fits loosely ({outline.best.chamfer_px:.2f} px > {sil.max_chamfer_px:g} px) and the "
                     f"flip classifier gives the pose only {flip_p:.3f} (< {fc.loose_fit_min_prob:g})")
-        learned = self._learned_choice(outline, flip_p, reg.tau_m)
+        learned = self._learned_choice(outline, flip_p, reg.tau_m, flip_views, timer)
         if outline is not None and outline.decided(sil):
             if conclusive and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:
                 return _stage_invalid(stage, "weak_votes", factors), (
@@ -931,15 +931,15 @@ class PoseEstimator:
                               templates=self._outline_templates)
 
     def _flip_probability(self, outline: Any, stereo: Any, left_r: np.ndarray | None, timer: StageTimer
-                          ) -> float | None:
-        """The flip classifier's probability for the outline's winner against its exact flip (``None``
-        without a classifier, an outline decision or an image); times ``flip_net`` (the graph's run is
-        network time, the view's making is not)."""
+                          ) -> tuple[float | None, np.ndarray | None]:
+        """The flip classifier's probability for the outline's winner against its exact flip and the
+        (1, 3, S, S) views it was given (``(None, None)`` without a classifier, an outline decision or an
+        image); times ``flip_net`` (the graph's run is network time, the view's making is not)."""
         if self._flip_classifier is None or outline is None or left_r is None or outline.frame is None:
-            return None
+            return None, None
         best = outline.best
         if not (np.all(np.isfinite(best.R)) and np.all(np.isfinite(best.t))):
-            return None
+            return None, None
         axis = self._flip_classifier.config.axis
         w = outline.frame
         with timer.stage("flip_net"):
@@ -948,17 +948,33 @@ class PoseEstimator:
             t_net = time.perf_counter()
             p = self._flip_classifier.probability(views)
             timer.add_network((time.perf_counter() - t_net) * 1e3)
-        return p
+        return p, views
 
-    def _learned_choice(self, outline: Any, flip_p: float | None,
-                        tau_m: float) -> tuple[np.ndarray, np.ndarray] | None:
+    def _decided_under_tones(self, views: np.ndarray | None, winner: bool, timer: StageTimer) -> bool:
+        """Whether the classifier still gives the ``winner`` (else its flip) at least ``decide_prob`` with the
+        views' grey plane under the tone curves of ``decide_tone_gamma`` (always, when that is 1); times
+        ``flip_net`` (network time)."""
+        fc = self.bundle.flip_classifier
+        if fc.decide_tone_gamma == 1.0:
+            return True
+        if views is None:
+            return False
+        with timer.stage("flip_net"):
+            t_net = time.perf_counter()
+            p = self._flip_classifier.toned_probabilities(views, fc.decide_tone_gamma)
+            timer.add_network((time.perf_counter() - t_net) * 1e3)
+        return bool(np.all(p >= fc.decide_prob) if winner else np.all(p <= 1.0 - fc.decide_prob))
+
+    def _learned_choice(self, outline: Any, flip_p: float | None, tau_m: float, views: np.ndarray | None,
+                        timer: StageTimer) -> tuple[np.ndarray, np.ndarray] | None:
         """The pose the flip classifier decides on a frame (``None`` when it does not): the outline's
         winner when it gives it at least ``decide_prob``, the outline's rival when it gives the winner
         at most ``1 - decide_prob`` and that rival is the winner's flip (within 20°, refined); either
         only when the pose fits the outline within ``max_chamfer_px``, the outline margin is at least
         ``min_margin_px``, the outlines differ in enough pixels, a usable image vote does not
-        back the other one and the registration's depth tolerance ``tau_m`` is at most
-        ``max_depth_tolerance_m`` (when set; NaN refuses)."""
+        back the other one, the registration's depth tolerance ``tau_m`` is at most
+        ``max_depth_tolerance_m`` (when set; NaN refuses) and the decision holds under other tone curves of
+        the ``views`` (``decide_tone_gamma``)."""
         if flip_p is None:
             return None
         fc, sil = self.bundle.flip_classifier, self.bundle.silhouette
@@ -971,14 +987,14 @@ class PoseEstimator:
         if flip_p >= fc.decide_prob and best.chamfer_px <= fc.max_chamfer_px:
             if vote is not None and vote.score <= sil.image_veto_score:
                 return None
-            return best.R, best.t
+            return (best.R, best.t) if self._decided_under_tones(views, True, timer) else None
         if flip_p <= 1.0 - fc.decide_prob and other.chamfer_px <= fc.max_chamfer_px and np.all(np.isfinite(other.R)):
             flip_R, _ = flipped_pose(best.R, best.t, self.bundle.centre, fc.axis)
             if float(rotation_angle_deg(flip_R, other.R)) > 20.0:
                 return None
             if vote is not None and vote.score >= -sil.image_veto_score:
                 return None
-            return other.R, other.t
+            return (other.R, other.t) if self._decided_under_tones(views, False, timer) else None
         return None
 
     def _valid_prior(self, max_gap: int | None = None) -> tuple[np.ndarray, np.ndarray] | None:

@@ -58,6 +58,11 @@ class FlipClassifierConfig:
         classifier gives it at least this, or when it gives none (no outline frame to look at); 0: no such
         check. A pose 172° off on a fresh frame of session 27 was so decided with p 0.59
         (``reports/flip_s27/gate_rule.txt``).
+    decide_tone_gamma: a frame the classifier decides must be decided, at ``decide_prob``, with the view's
+        grey plane raised to the powers ``g`` and ``1 / g`` as well (other renderers' tone curves; ``g`` 2 is
+        the end of the classifier's training augmentation, :func:`spacepose.tools.flip_data.augment_views`);
+        1: no such check. On a restyled frame of session 37 the classifier decided a pose 178.9° off at p
+        0.9998 that it gives 0.991 with its grey plane's tone curve raised to 1/2 (session 38).
     """
 
     file: str = "flip.onnx"
@@ -71,6 +76,7 @@ class FlipClassifierConfig:
     max_depth_tolerance_m: float = 0.0
     loose_fit_min_prob: float = 0.0
     registration_min_prob: float = 0.0
+    decide_tone_gamma: float = 1.0
 
     def __post_init__(self) -> None:
         if self.size < 16:
@@ -86,6 +92,8 @@ class FlipClassifierConfig:
         for key in ("loose_fit_min_prob", "registration_min_prob"):
             if not 0.0 <= getattr(self, key) <= 1.0:
                 raise ValueError(f"flip_classifier.{key} must be in [0, 1], got {getattr(self, key)}")
+        if not 1.0 <= self.decide_tone_gamma <= 4.0:
+            raise ValueError(f"flip_classifier.decide_tone_gamma must be in [1, 4], got {self.decide_tone_gamma}")
 
 
 def parse_flip_classifier(section: Any) -> FlipClassifierConfig | None:
@@ -150,3 +158,19 @@ class FlipClassifier:
         """Probability that the first pose of :meth:`views` is the right one (runs the graph)."""
         logit = float(self.session.run(["logit"], {"views": views})[0].reshape(-1)[0])
         return float(1.0 / (1.0 + np.exp(-np.clip(logit, -60.0, 60.0))))
+
+    def toned_probabilities(self, views: np.ndarray, gamma: float) -> np.ndarray:
+        """(2,) probabilities that the first pose of ``views`` (1, 3, S, S; :meth:`views`) is the right one with
+        the grey plane raised to the powers ``gamma`` and ``1 / gamma`` (one run of the graph on both). The
+        grey plane is a brightness relative to the target's own (:func:`spacepose.flip_views.flip_views`), so a
+        power of it is the view of the image under another tone curve, up to the pixels clipped at 2."""
+        if views.ndim != 4 or views.shape[0] != 1 or views.shape[1] != CHANNELS:
+            raise ValueError(f"toned_probabilities takes (1, {CHANNELS}, S, S) views, got {views.shape}")
+        if not (np.isfinite(gamma) and gamma > 0.0):
+            raise ValueError(f"toned_probabilities: gamma must be finite and > 0, got {gamma}")
+        toned = np.repeat(views.astype(np.float32, copy=False), 2, axis=0)
+        grey = np.clip(views[0, 0], 0.0, 2.0)
+        for k, power in enumerate((gamma, 1.0 / gamma)):
+            np.clip(grey ** np.float32(power), 0.0, 2.0, out=toned[k, 0])
+        logit = self.session.run(["logit"], {"views": toned})[0].reshape(-1).astype(np.float64)
+        return 1.0 / (1.0 + np.exp(-np.clip(logit, -60.0, 60.0)))

@@ -65,6 +65,7 @@ def test_view_frame_upscales_unlike_the_silhouette_frame():
     ({"size": 8}, "size"), ({"axis": "w"}, "axis"), ({"decide_prob": 0.4}, "decide_prob"),
     ({"veto_prob": 0.6}, "veto_prob"), ({"max_chamfer_px": -1}, "max_chamfer_px"), ({"file": 3}, "string"),
     ({"size": 64.5}, "integer"), ({"decide_prob": float("nan")}, "finite"),
+    ({"decide_tone_gamma": 0.5}, "decide_tone_gamma"), ({"decide_tone_gamma": 5.0}, "decide_tone_gamma"),
 ])
 def test_bad_sections_are_refused(section, match):
     with pytest.raises(BundleError, match=match):
@@ -180,6 +181,80 @@ def _decision(est, seen, chamfer=1.2, margin=0.3, vote=None, other_turn=0.0):
         return OutlineDecision(best=OutlineFit(R, t, chamfer), other=OutlineFit(R_f, t_f, chamfer + margin),
                                best_index=0, margin_px=margin, turned_deg=180.0, vote=vote, frame=frame)
     return decide
+
+
+def test_toned_probabilities_are_the_graph_on_the_toned_views(tmp_path):
+    """decide_tone_gamma: the grey plane raised to g and 1 / g, clipped to [0, 2] as flip_views clips it, in one run."""
+    make_flip_graph(tmp_path / "flip.onnx", gain=5.0)
+    clf = FlipClassifier(tmp_path, FlipClassifierConfig(size=SIZE), "tiny")
+    pts = _points()
+    R, t = np.eye(3), np.array([0.0, 0.0, 20.0])
+    Rf, tf = flipped_pose(R, t, np.zeros(3), "z")
+    rng = np.random.default_rng(3)
+    image = rng.integers(40, 110, (480, 640)).astype(np.uint8)
+    image[150:160] = 255                             # a bright band at the window's top, outside the outlines
+    views = clf.views(image, K, (230, 150, 180), pts, (R, t), (Rf, tf))
+    assert views[0, 0].max() > np.sqrt(2.0)          # some pixels clip at 2 under the power 2
+    fed = []
+
+    class Recording:                                 # the graph's session, recording what it is fed
+        def __init__(self, session):
+            self.session = session
+
+        def run(self, names, feed):
+            fed.append(feed["views"].copy())
+            return self.session.run(names, feed)
+
+    clf.session = Recording(clf.session)
+    got = clf.toned_probabilities(views, 2.0)
+    want, wanted_views = [], []
+    for power in (2.0, 0.5):
+        toned = views.copy()
+        toned[0, 0] = np.minimum(views[0, 0].astype(np.float64) ** power, 2.0)
+        wanted_views.append(toned[0])
+        want.append(clf.probability(toned))
+    assert len(fed[0]) == 2 and np.allclose(fed[0], np.stack(wanted_views), atol=1e-6)
+    assert fed[0][:, 1:] == pytest.approx(np.repeat(views[:, 1:], 2, axis=0))       # the outlines untouched
+    assert got.shape == (2,) and got == pytest.approx(want, abs=1e-5)
+    assert len(set(np.round(want + [clf.probability(views)], 6))) == 3     # the tones do move this graph's score
+    assert clf.toned_probabilities(views, 1.0) == pytest.approx([clf.probability(views)] * 2, abs=1e-6)
+    with pytest.raises(ValueError, match="views"):
+        clf.toned_probabilities(views[0], 2.0)
+    with pytest.raises(ValueError, match="gamma"):
+        clf.toned_probabilities(views, float("nan"))
+
+
+@pytest.mark.parametrize("prob, toned, valid, flipped", [
+    (0.95, None, True, False),              # decide_tone_gamma 1: the tones are not looked at
+    (0.95, (0.95, 0.92), True, False),      # the winner holds under both tones
+    (0.95, (0.97, 0.6), False, False),      # ... not under one: refused
+    (0.05, (0.02, 0.08), True, True),       # the flip holds under both
+    (0.05, (0.5, 0.01), False, False),      # ... not under one: refused
+])
+def test_a_classifier_decision_must_hold_under_other_tone_curves(tmp_path, monkeypatch, prob, toned, valid, flipped):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from spacepose.registration import rotation_angle_deg
+
+    left, right = synthetic_pair()
+    calls = []
+
+    def fake_toned(self, views, gamma):
+        calls.append((views.shape, gamma))
+        return np.asarray(toned)
+
+    est = _flip_estimator(tmp_path, monkeypatch, prob, decide_tone_gamma=1.0 if toned is None else 2.0)
+    monkeypatch.setattr(FlipClassifier, "toned_probabilities", fake_toned)
+    seen = {}
+    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, seen, 1.2, 0.3))
+    monkeypatch.setattr(estimator_module, "polish_pose", lambda *a, **k: None)
+    res = est.estimate(left, right)
+    assert res.valid == valid, res.detail
+    assert calls == ([] if toned is None else [((1, 3, SIZE, SIZE), 2.0)])
+    if valid:
+        assert res.decided_by == "classifier" and (rotation_angle_deg(res.R, seen["R"]) > 90.0) == flipped
+    else:
+        assert res.status == "weak_votes" and res.flip_prob == prob
 
 
 @pytest.mark.parametrize("prob, chamfer, margin, vote, other_turn, valid, flipped", [
@@ -451,7 +526,7 @@ def test_a_registration_decision_needs_the_classifier(tmp_path, monkeypatch, pro
     assert est.bundle.flip_classifier.registration_min_prob == gate
     monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 1.2, 0.3))
     if no_view:
-        monkeypatch.setattr(estimator_module.PoseEstimator, "_flip_probability", lambda self, *a: None)
+        monkeypatch.setattr(estimator_module.PoseEstimator, "_flip_probability", lambda self, *a: (None, None))
     res = est.estimate(left, right)
     assert res.valid == valid, res.detail
     if valid:
