@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-HELP = "rebuild a training checkpoint (for --init) from an exported stereo or pose graph"
+HELP = "rebuild a training checkpoint (for --init) from an exported stereo, pose or flip graph"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("graph", type=Path, help="stereo.onnx or pose.onnx exported by this project")
+    parser.add_argument("graph", type=Path, help="stereo.onnx, pose.onnx or flip.onnx exported by this project")
     parser.add_argument("--out", type=Path, required=True, help="checkpoint file to write (.pt)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing --out")
 

@@ -23,7 +23,7 @@ HELP = "export a flip-classifier checkpoint to ONNX with its metadata contract a
 
 log = logging.getLogger(__name__)
 
-__all__ = ["flip_metadata", "export_flip", "example_views"]
+__all__ = ["flip_metadata", "export_flip", "example_views", "write_flip_graph", "parity_check"]
 
 PARITY_TOLERANCE = 1e-4
 
@@ -57,15 +57,41 @@ def example_views(size: int, n: int = 4, seed: int = 0) -> np.ndarray:
     return views
 
 
+def write_flip_graph(model: Any, path: str | Path, metadata: Mapping[str, Any]) -> None:
+    """Write the (eval-mode) FlipNet ``model`` to ``path`` as the flip graph (batch axis free), with ``metadata``."""
+    import torch
+
+    from spacepose.export.onnx_common import export_onnx_file
+
+    views = example_views(model.config.size)
+    export_onnx_file(model, (torch.from_numpy(views),), Path(path), input_names=["views"], output_names=["logit"],
+                     metadata=dict(metadata), graph_name="flip graph",
+                     dynamic_axes={"views": {0: "B"}, "logit": {0: "B"}})
+
+
+def parity_check(model: Any, path: str | Path) -> float:
+    """Largest |logit| difference between the FlipNet ``model`` (torch, eval mode) and the graph at ``path``
+    (onnxruntime) on :func:`example_views` batches of 1, 2 and 5."""
+    import torch
+
+    from spacepose.export.onnx_common import max_abs_diff
+    from spacepose.onnx_session import make_session
+
+    session = make_session(Path(path), threads=1)
+    diff = 0.0
+    for n in (1, 2, 5):
+        v = example_views(model.config.size, n=n, seed=n)
+        with torch.no_grad():
+            ref = model(torch.from_numpy(v)).numpy()
+        diff = max(diff, max_abs_diff("logit", session.run(["logit"], {"views": v})[0], ref))
+    return diff
+
+
 def export_flip(checkpoint: str | Path, out: str | Path, *, force: bool = False, target: str = "tdrs", axis: str = "z",
                 update_manifest: bool = True) -> dict[str, Any]:
     """Export ``checkpoint`` (``spacepose train-flip``'s ``last.pt``) to ``out``; -> path, parity, metadata."""
-    import torch
-
-    from spacepose.export.onnx_common import (check_overwrite, enforce_parity, export_onnx_file, max_abs_diff,
-                                              update_manifest as update)
+    from spacepose.export.onnx_common import check_overwrite, enforce_parity, update_manifest as update
     from spacepose.models.flip_net import FlipNet, FlipNetConfig
-    from spacepose.onnx_session import make_session
     from spacepose.tools.training_common import load_checkpoint
 
     path = check_overwrite(out, force)
@@ -77,16 +103,8 @@ def export_flip(checkpoint: str | Path, out: str | Path, *, force: bool = False,
     model.eval()
     meta = flip_metadata(config, target=target, axis=axis, extra={"steps": int(ckpt.get("step", 0)),
                                                                  "samples": int(ckpt.get("samples", 0))})
-    views = example_views(config.size)
-    export_onnx_file(model, (torch.from_numpy(views),), path, input_names=["views"], output_names=["logit"],
-                     metadata=meta, graph_name="flip graph", dynamic_axes={"views": {0: "B"}, "logit": {0: "B"}})
-    session = make_session(path, threads=1)
-    diff = 0.0
-    for n in (1, 2, 5):
-        v = example_views(config.size, n=n, seed=n)
-        with torch.no_grad():
-            ref = model(torch.from_numpy(v)).numpy()
-        diff = max(diff, max_abs_diff("logit", session.run(["logit"], {"views": v})[0], ref))
+    write_flip_graph(model, path, meta)
+    diff = parity_check(model, path)
     enforce_parity(path, diff, PARITY_TOLERANCE)
     manifest = None
     if update_manifest:

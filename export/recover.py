@@ -345,8 +345,21 @@ def checkpoint_from_graph(onnx_path: str | os.PathLike) -> dict:
         tolerance = 1e-3
         ckpt = {"kind": "pose", "net_config": dataclasses.asdict(config), "keypoints": meta.get("keypoints"),
                 "centre": meta.get("centre"), "target": meta.get("target")}
+    elif kind == "flip":
+        from spacepose.export import onnx_flip
+        from spacepose.models.flip_net import FlipNet, FlipNetConfig
+
+        raw = dict(meta["config"])
+        config = FlipNetConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in raw.items()})
+        model = FlipNet(config).eval()
+        report = recover_state_dict(model, onnx_path, lambda m, p: onnx_flip.write_flip_graph(m, p, {}))
+        diff = onnx_flip.parity_check(model, onnx_path)
+        tolerance = onnx_flip.PARITY_TOLERANCE
+        ckpt = {"kind": "flip", "net_config": dataclasses.asdict(config), "samples": int(meta.get("samples") or 0),
+                "target": meta.get("target"), "axis": meta.get("axis")}
+        training = {"step": meta.get("steps")}
     else:
-        raise SpaceposeError(f"{onnx_path}: metadata kind {kind!r} is neither 'stereo' nor 'pose'")
+        raise SpaceposeError(f"{onnx_path}: metadata kind {kind!r} is not 'stereo', 'pose' or 'flip'")
     if not diff < tolerance:
         raise SpaceposeError(f"{onnx_path}: the recovered model differs from the graph by {diff:.3g} (> {tolerance})")
     log.info("%s: recovered %s model matches the graph to %.2g", onnx_path, kind, diff)

@@ -26,7 +26,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .errors import BundleError
-from .flip_views import CHANNELS, flip_views
+from .flip_views import CHANNELS, flip_views, toned_views
 
 logger = logging.getLogger(__name__)
 
@@ -161,16 +161,12 @@ class FlipClassifier:
 
     def toned_probabilities(self, views: np.ndarray, gamma: float) -> np.ndarray:
         """(2,) probabilities that the first pose of ``views`` (1, 3, S, S; :meth:`views`) is the right one with
-        the grey plane raised to the powers ``gamma`` and ``1 / gamma`` (one run of the graph on both). The
-        grey plane is a brightness relative to the target's own (:func:`spacepose.flip_views.flip_views`), so a
-        power of it is the view of the image under another tone curve, up to the pixels clipped at 2."""
+        the grey plane raised to the powers ``gamma`` and ``1 / gamma`` (:func:`spacepose.flip_views.toned_views`;
+        one run of the graph on both)."""
         if views.ndim != 4 or views.shape[0] != 1 or views.shape[1] != CHANNELS:
             raise ValueError(f"toned_probabilities takes (1, {CHANNELS}, S, S) views, got {views.shape}")
         if not (np.isfinite(gamma) and gamma > 0.0):
             raise ValueError(f"toned_probabilities: gamma must be finite and > 0, got {gamma}")
-        toned = np.repeat(views.astype(np.float32, copy=False), 2, axis=0)
-        grey = np.clip(views[0, 0], 0.0, 2.0)
-        for k, power in enumerate((gamma, 1.0 / gamma)):
-            np.clip(grey ** np.float32(power), 0.0, 2.0, out=toned[k, 0])
+        toned = np.concatenate([toned_views(views, gamma), toned_views(views, 1.0 / gamma)])
         logit = self.session.run(["logit"], {"views": toned})[0].reshape(-1).astype(np.float64)
         return 1.0 / (1.0 + np.exp(-np.clip(logit, -60.0, 60.0)))

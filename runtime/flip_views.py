@@ -30,7 +30,7 @@ from .errors import check_shape
 from .image_vote import window_grey
 from .silhouette import SilhouetteFrame, splat_mask
 
-__all__ = ["view_frame", "flip_views", "CHANNELS"]
+__all__ = ["view_frame", "flip_views", "toned_views", "CHANNELS"]
 
 #: planes of one view: grey, outline A, outline B
 CHANNELS = 3
@@ -72,4 +72,18 @@ def flip_views(image: np.ndarray, K_full: np.ndarray, window: tuple[int, int, in
     np.clip(grey / max(top, 1e-3), 0.0, 2.0, out=out[0])
     out[1] = mask_a
     out[2] = mask_b
+    return out
+
+
+def toned_views(views: np.ndarray, power: float) -> np.ndarray:
+    """A copy of (N, 3, S, S) ``views`` with the grey plane raised to ``power`` and clipped to [0, 2] as
+    :func:`flip_views` clips it: the views of the same images under another tone curve (the grey plane is a
+    brightness relative to the target's own 90th percentile, which a power maps onto itself). The outlines
+    are untouched. Used by the run-time check ``decide_tone_gamma`` and by the classifier's training."""
+    if views.ndim != 4 or views.shape[1] != CHANNELS:
+        raise ValueError(f"toned_views takes (N, {CHANNELS}, S, S) views, got {views.shape}")
+    if not (np.isfinite(power) and power > 0.0):
+        raise ValueError(f"toned_views: power must be finite and > 0, got {power}")
+    out = np.array(views, dtype=np.float32, copy=True)
+    np.clip(np.clip(out[:, 0], 0.0, 2.0) ** np.float32(power), 0.0, 2.0, out=out[:, 0])
     return out

@@ -13,6 +13,14 @@ share of samples with ``p >= 0.9`` (either way) and the error among them, overal
 :func:`spacepose.tools.flip_data.wrong_pose`); validation then also reports the share of those the
 classifier is sure of (``p >= 0.99`` either way), which must stay small for ``decide_prob`` to mean
 anything. ``--init CKPT`` starts from another run's weights (a fine-tune; a fresh optimiser).
+
+``--tone-consistency W`` (session 38) adds ``W`` times the mean squared difference of the logits (each clipped to
+±``TONE_CLIP``) between every sample's view and the same view under another tone curve
+(:func:`spacepose.flip_views.toned_views`, the power log-uniform in [1/2, 2]): the run-time check
+``flip_classifier.decide_tone_gamma`` refuses a decision that does not hold at the powers 2 and 1/2, and on
+session 38's fresh frames it refused many right ones; this teaches the classifier to be sure, or unsure, at every
+tone. Validation then also reports ``tone_kept``: of the samples with a right pose that it decides at
+``DECIDE`` (either way), the share it still decides, the same way, at the powers 2 and 1/2.
 """
 
 from __future__ import annotations
@@ -32,6 +40,10 @@ HELP = "train the flip classifier (which of a pose and its 180° flip the left i
 log = logging.getLogger(__name__)
 
 KIND = "flip"
+#: the run-time decide_prob the validation's tone metric is measured at, and the logit clip of the tone loss
+DECIDE, TONE_CLIP = 0.995, 8.0
+#: the tone curves the run-time check uses (flip_classifier.decide_tone_gamma 2)
+TONE_POWERS = (2.0, 0.5)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -61,6 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--init", type=Path, default=None, help="start from this train-flip checkpoint's weights")
     parser.add_argument("--neither-prob", type=float, default=0.0,
                         help="share of samples with both poses wrong (label 0.5)")
+    parser.add_argument("--tone-consistency", type=float, default=0.0,
+                        help="weight of the loss that ties each view's logit to its logit under another tone curve "
+                             "(0: off)")
 
 
 def _samples(path: Path, dataset: Path, bundle: Any, *, split: str | None, per_frame: int, seed: int, size: int,
@@ -86,21 +101,38 @@ def _samples(path: Path, dataset: Path, bundle: Any, *, split: str | None, per_f
     return load_samples(path)
 
 
+def tone_loss(logit: Any, toned_logit: Any) -> Any:
+    """Mean squared difference of (B,) logits and the same views' (B,) logits under another tone curve, each
+    clipped to ±``TONE_CLIP`` (beyond it both are sure enough for any gate), as a torch scalar."""
+    return ((logit.clamp(-TONE_CLIP, TONE_CLIP) - toned_logit.clamp(-TONE_CLIP, TONE_CLIP)) ** 2).mean()
+
+
+def _logits(model: Any, views: np.ndarray, batch: int) -> np.ndarray:
+    import torch
+
+    with torch.no_grad():
+        return np.concatenate([model(torch.from_numpy(views[i:i + batch])).numpy()
+                               for i in range(0, len(views), batch)])
+
+
 def evaluate(model: Any, views: np.ndarray, labels: np.ndarray, regimes: np.ndarray, batch: int = 128
              ) -> dict[str, Any]:
     """Accuracy, and coverage / error at ``p >= 0.9`` either way, overall and per regime, over the samples
     with one right pose; over those with none (label 0.5), their number and the share with ``p >= 0.99``
-    either way (``neither_sure``)."""
-    import torch
+    either way (``neither_sure``); and ``tone_kept`` (module docstring), with ``decided`` the share of the samples
+    with one right pose that it decides at ``DECIDE``."""
+    from spacepose.flip_views import toned_views
 
     model.eval()
-    logits = []
-    with torch.no_grad():
-        for i in range(0, len(views), batch):
-            logits.append(model(torch.from_numpy(views[i:i + batch])).numpy())
+    logit = _logits(model, views, batch)
+    toned = [_logits(model, toned_views(views, power), batch) for power in TONE_POWERS]
     model.train()
-    logit = np.concatenate(logits)
     p = 1.0 / (1.0 + np.exp(-logit))
+    sure_side = np.where(p >= DECIDE, 1, np.where(p <= 1.0 - DECIDE, -1, 0))
+    holds = sure_side != 0
+    for t in toned:
+        q = 1.0 / (1.0 + np.exp(-t))
+        holds &= np.where(sure_side > 0, q >= DECIDE, q <= 1.0 - DECIDE)
 
     neither = labels == 0.5
 
@@ -114,6 +146,9 @@ def evaluate(model: Any, views: np.ndarray, labels: np.ndarray, regimes: np.ndar
         if none.any():
             out.update(neither=int(none.sum()),
                        neither_sure=float((np.maximum(p[none], 1.0 - p[none]) >= 0.99).mean()))
+        decided = sure_side[sel] != 0
+        out["decided"] = float(decided.mean()) if sel.any() else float("nan")
+        out["tone_kept"] = float(holds[sel][decided].mean()) if decided.any() else float("nan")
         return out
 
     out = {"all": stats(np.ones(len(p), bool))}
@@ -128,8 +163,10 @@ def run(args: argparse.Namespace) -> int:
     from spacepose.bundle import load_bundle
     from spacepose.errors import SpaceposeError
     from spacepose.models.flip_net import FlipNet, FlipNetConfig
+    from spacepose.flip_views import toned_views
     from spacepose.tools.flip_data import augment_views
-    from spacepose.tools.training_common import JsonlLog, atomic_save, load_checkpoint, seed_all
+    from spacepose.tools.training_common import (JsonlLog, atomic_save, freeze_folded_batchnorm, load_checkpoint,
+                                                 seed_all)
 
     if args.steps < 1 or args.batch < 2:
         raise SpaceposeError("--steps must be >= 1 and --batch >= 2")
@@ -148,6 +185,8 @@ def run(args: argparse.Namespace) -> int:
         raise SpaceposeError(f"--neither-prob must be in [0, 1), got {args.neither_prob}")
     if args.stop_step < 0:
         raise SpaceposeError(f"--stop-step must be >= 0 (0: none), got {args.stop_step}")
+    if not (math.isfinite(args.tone_consistency) and args.tone_consistency >= 0.0):
+        raise SpaceposeError(f"--tone-consistency must be >= 0, got {args.tone_consistency}")
     train = _samples(out / "train_samples.npz", args.dataset, bundle, split="train", per_frame=args.per_frame,
                      seed=args.seed, size=args.size, limit=None, neither_prob=args.neither_prob)
     for k, more in enumerate(args.more, start=1):
@@ -162,9 +201,15 @@ def run(args: argparse.Namespace) -> int:
     optim = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=args.weight_decay)
     sched = torch.optim.lr_scheduler.LambdaLR(
         optim, lambda s: min(1.0, (s + 1) / 100) * 0.5 * (1.0 + math.cos(math.pi * min(s, args.steps) / args.steps)))
-    step = 0
+    step, folded = 0, []
     if args.init is not None and not args.resume:
-        model.load_state_dict(load_checkpoint(args.init, kind=KIND)["model"])
+        init = load_checkpoint(args.init, kind=KIND)
+        theirs = {k: tuple(v) if isinstance(v, list) else v for k, v in dict(init["net_config"]).items()}
+        if FlipNetConfig(**theirs) != config:
+            raise SpaceposeError(f"--init {args.init}: its network config {theirs} is not this run's "
+                                 f"{dataclasses.asdict(config)}")
+        model.load_state_dict(init["model"])
+        folded = list(init.get("folded_bn") or [])     # weights recovered from a graph (recover-checkpoint)
         log.info("weights from %s", args.init)
     if args.resume:
         ckpt = load_checkpoint(ckpt_path, kind=KIND)
@@ -172,6 +217,8 @@ def run(args: argparse.Namespace) -> int:
         optim.load_state_dict(ckpt["optimizer"])
         sched.load_state_dict(ckpt["scheduler"])
         step = int(ckpt["step"])
+        folded = list(ckpt.get("folded_bn") or [])
+    freeze_folded_batchnorm(model, folded)
     log_file = JsonlLog(out / "log.jsonl", True)
     loss_fn = torch.nn.BCEWithLogitsLoss()
     n = len(train["labels"])
@@ -181,7 +228,7 @@ def run(args: argparse.Namespace) -> int:
         atomic_save({"kind": KIND, "model": model.state_dict(), "optimizer": optim.state_dict(),
                      "scheduler": sched.state_dict(), "step": step, "net_config": dataclasses.asdict(config),
                      "train_config": {k: str(v) for k, v in vars(args).items() if not k.startswith("_")},
-                     "samples": n}, ckpt_path)
+                     "samples": n, "folded_bn": folded}, ckpt_path)
 
     last = min(args.steps, args.stop_step) if args.stop_step > 0 else args.steps
     model.train()
@@ -193,8 +240,15 @@ def run(args: argparse.Namespace) -> int:
         swap = rng.random(args.batch) < 0.5              # slot order is free: swap A and B, flip the label
         views[swap, 1], views[swap, 2] = views[swap, 2].copy(), views[swap, 1].copy()
         labels[swap] = 1.0 - labels[swap]
-        logit = model(torch.from_numpy(views))
-        loss = loss_fn(logit, torch.from_numpy(labels))
+        if args.tone_consistency > 0.0:
+            powers = np.exp(rng.uniform(math.log(0.5), math.log(2.0), size=args.batch))
+            toned = np.concatenate([toned_views(views[k:k + 1], float(powers[k])) for k in range(args.batch)])
+            both = model(torch.from_numpy(np.concatenate([views, toned])))
+            logit, toned_logit = both[:args.batch], both[args.batch:]
+            loss = loss_fn(logit, torch.from_numpy(labels)) + args.tone_consistency * tone_loss(logit, toned_logit)
+        else:
+            logit = model(torch.from_numpy(views))
+            loss = loss_fn(logit, torch.from_numpy(labels))
         optim.zero_grad(set_to_none=True)
         loss.backward()
         optim.step()

@@ -120,6 +120,35 @@ def test_evaluate_reports_how_sure_it_is_when_neither_pose_is_right():
     assert out["all"]["neither"] == 3 and out["all"]["neither_sure"] == pytest.approx(2 / 3)
 
 
+def test_evaluate_reports_which_decisions_hold_under_other_tone_curves():
+    """tone_kept: of the samples decided at 0.995, the share still decided the same way with the grey plane raised
+    to 2 and to 1/2 (the run-time check decide_tone_gamma 2)."""
+    from spacepose.tools.train_flip import evaluate
+
+    class Grey(torch.nn.Module):                      # logit = 20 (g - 0.5), g the grey plane's first pixel
+        def forward(self, views):
+            return 20.0 * (views[:, 0, 0, 0] - 0.5)
+
+    views = np.zeros((5, 3, 4, 4), np.float32)
+    # 1.0: sure at every tone; 0.9: 8 -> 6.2 / 9.0, holds; 0.8: 6 -> 2.8 at g 2, does not; 0.5: undecided;
+    # 0.1: sure the other way (-8), and at 0.01 / 0.316 (-9.8 / -3.7) not at g 1/2
+    views[:, 0] = np.array([1.0, 0.9, 0.8, 0.5, 0.1], np.float32)[:, None, None]
+    out = evaluate(Grey(), views, np.ones(5, np.float32), np.array(["a", "a", "b", "b", "b"]))
+    assert out["all"]["decided"] == pytest.approx(4 / 5) and out["all"]["tone_kept"] == pytest.approx(2 / 4)
+    assert out["a"]["tone_kept"] == 1.0 and out["b"]["tone_kept"] == 0.0
+
+
+def test_the_tone_loss_ties_logits_within_the_clip():
+    from spacepose.tools.train_flip import TONE_CLIP, tone_loss
+
+    a = torch.tensor([1.0, 5.0, 20.0, -3.0], requires_grad=True)
+    b = torch.tensor([1.0, 2.0, 9.0, 3.0])
+    loss = tone_loss(a, b)
+    assert float(loss.detach()) == pytest.approx((0 + 9 + 0 + 36) / 4)     # 20 and 9 are both past the clip (8)
+    loss.backward()
+    assert a.grad.tolist() == pytest.approx([0.0, 1.5, 0.0, -3.0]) and TONE_CLIP == 8.0
+
+
 @pytest.fixture(scope="module")
 def plate_bundle(tmp_path_factory):
     from _bundle_fixtures import make_bundle, manifest
@@ -155,6 +184,12 @@ def test_train_resume_and_export(synthetic_dataset, plate_bundle, tmp_path):
     moved = [float((first["model"][k] - ckpt["model"][k]).abs().max()) for k in weights]
     assert weights and max(moved) < 0.05    # one step from the initial weights, not a fresh draw (another seed)
     assert main(args[:5] + [str(tmp_path / "bad")] + args[6:] + ["--steps", "1", "--neither-prob", "1.5"]) == 2
+    assert main(args[:5] + [str(tmp_path / "bad2")] + args[6:] + ["--steps", "1", "--tone-consistency", "-1"]) == 2
+    toned = tmp_path / "toned"     # the tone loss trains too, and validation reports tone_kept
+    assert main(args[:5] + [str(toned)] + args[6:] + ["--steps", "3", "--tone-consistency", "0.5"]) == 0
+    toned_log = [json.loads(line) for line in (toned / "log.jsonl").read_text().splitlines()]
+    assert "tone_kept" in toned_log[-1]["val"]["all"]
+    assert torch.load(toned / "last.pt", weights_only=False)["train_config"]["tone_consistency"] == "0.5"
 
     bundle = tmp_path / "bundle"
     bundle.mkdir()
@@ -178,6 +213,41 @@ def test_train_resume_and_export(synthetic_dataset, plate_bundle, tmp_path):
         np.testing.assert_allclose(got, net(torch.from_numpy(v)).numpy(), atol=1e-4)
     swapped = np.ascontiguousarray(v[:, [0, 2, 1]])
     np.testing.assert_allclose(session.run(["logit"], {"views": swapped})[0], -got, atol=1e-5)
+
+
+def test_a_graph_recovered_to_a_checkpoint_fine_tunes_with_frozen_batchnorms(synthetic_dataset, plate_bundle,
+                                                                              tmp_path):
+    """recover-checkpoint on a flip graph gives the trained weights back (parity with the graph); train-flip --init
+    from it keeps the folded BatchNorms' statistics, also across --resume, and refuses another net config."""
+    from spacepose.export.onnx_flip import parity_check
+    from spacepose.models.flip_net import FlipNet, FlipNetConfig
+
+    args = ["train-flip", str(synthetic_dataset), "--val", str(synthetic_dataset), "--bundle", str(plate_bundle),
+            "--size", "32", "--batch", "4", "--per-frame", "2", "--val-frames", "4", "--ckpt-every", "100",
+            "--val-every", "100"]
+    assert main(args + ["--out", str(tmp_path / "a"), "--steps", "2"]) == 0
+    graph = tmp_path / "b" / "flip.onnx"
+    graph.parent.mkdir()
+    assert main(["export-flip", str(tmp_path / "a" / "last.pt"), "--out", str(graph)]) == 0
+    assert main(["recover-checkpoint", str(graph), "--out", str(tmp_path / "rec.pt")]) == 0
+    rec = torch.load(tmp_path / "rec.pt", weights_only=False)
+    assert rec["kind"] == "flip" and rec["folded_bn"] and rec["step"] == 2 and rec["parity"] < 1e-4
+    net = FlipNet(FlipNetConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in rec["net_config"].items()}))
+    net.load_state_dict(rec["model"])
+    assert parity_check(net.eval(), graph) < 1e-4
+
+    tuned = tmp_path / "tuned"
+    assert main(args + ["--out", str(tuned), "--steps", "4", "--stop-step", "2", "--init", str(tmp_path / "rec.pt"),
+                        "--tone-consistency", "0.5"]) == 0
+    assert main(args + ["--out", str(tuned), "--steps", "4", "--resume"]) == 0
+    out = torch.load(tuned / "last.pt", weights_only=False)
+    assert out["step"] == 4 and out["folded_bn"] == rec["folded_bn"]
+    stats = [k for k in rec["model"] if k.endswith(("running_mean", "running_var"))]
+    assert stats and all(torch.equal(out["model"][k], rec["model"][k]) for k in stats)
+    moved = [k for k in rec["model"] if k.endswith("weight") and not torch.equal(out["model"][k], rec["model"][k])]
+    assert moved                                                  # the rest did train
+    assert main(args + ["--out", str(tmp_path / "bad"), "--steps", "1", "--init", str(tmp_path / "rec.pt"),
+                        "--size", "64"]) == 2                     # another net config
 
 
 def test_a_stopped_and_resumed_run_is_the_uninterrupted_run(synthetic_dataset, plate_bundle, tmp_path):
