@@ -138,15 +138,17 @@ def test_evaluate_reports_which_decisions_hold_under_other_tone_curves():
     assert out["a"]["tone_kept"] == 1.0 and out["b"]["tone_kept"] == 0.0
 
 
-def test_the_tone_loss_ties_logits_within_the_clip():
+def test_the_tone_loss_asks_the_toned_logit_to_be_as_sure_on_the_same_side():
     from spacepose.tools.train_flip import TONE_CLIP, tone_loss
 
-    a = torch.tensor([1.0, 5.0, 20.0, -3.0], requires_grad=True)
-    b = torch.tensor([1.0, 2.0, 9.0, 3.0])
+    a = torch.tensor([1.0, 5.0, 20.0, -3.0, 4.0], requires_grad=True)
+    b = torch.tensor([1.0, 2.0, 6.0, 3.0, 7.0], requires_grad=True)
     loss = tone_loss(a, b)
-    assert float(loss.detach()) == pytest.approx((0 + 9 + 0 + 36) / 4)     # 20 and 9 are both past the clip (8)
+    # short by 0, 3, 2 (20 clips to 8), 6 (the other side), 0 (surer is fine)
+    assert TONE_CLIP == 8.0 and float(loss.detach()) == pytest.approx((0 + 9 + 4 + 36 + 0) / 5)
     loss.backward()
-    assert a.grad.tolist() == pytest.approx([0.0, 1.5, 0.0, -3.0]) and TONE_CLIP == 8.0
+    assert a.grad is None or not a.grad.any()                    # the logit as rendered is the target, held constant
+    assert b.grad.tolist() == pytest.approx([0.0, -1.2, -0.8, 2.4, 0.0])
 
 
 @pytest.fixture(scope="module")
