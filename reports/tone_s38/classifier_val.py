@@ -9,7 +9,8 @@ the dataset (``python -m spacepose.tools.restyle``) gives the same poses, frames
 the two tables differ only by the look. ``table`` prints ``spacepose.tools.train_flip.evaluate``'s metrics for every
 checkpoint (``train-flip``'s ``last.pt`` or ``spacepose recover-checkpoint``'s rebuild of a shipped graph):
 accuracy, ``decided`` (share decided at 0.995), ``tone_kept`` (of those, the share still decided the same way with the
-grey plane raised to 2 and 1/2), ``sure_error`` (error among p >= 0.9) and ``neither_sure``; and, for two sample
+grey plane raised to 2 and 1/2), ``sure_error`` (error among p >= 0.9) and ``neither_sure``, and the decisions at 0.995
+that are wrong (or made where neither pose is right); and, for two sample
 files given (as rendered, restyled), how often a decision at 0.995 turns to the other side or to undecided.
 """
 from __future__ import annotations
@@ -65,7 +66,13 @@ def table(sample_paths: list[str], ckpts: list[str]) -> None:
                 logit = torch.cat([net(torch.from_numpy(s["views"][i:i + 128]))
                                    for i in range(0, len(s["views"]), 128)]).numpy()
             p = 1.0 / (1.0 + np.exp(-logit.astype(np.float64)))
-            sides[(ckpt, path)] = np.where(p >= DECIDE, 1, np.where(p <= 1.0 - DECIDE, -1, 0))
+            side = sides[(ckpt, path)] = np.where(p >= DECIDE, 1, np.where(p <= 1.0 - DECIDE, -1, 0))
+            one = s["labels"] != 0.5
+            truth = np.where(s["labels"] > 0.5, 1, -1)
+            decided = one & (side != 0)
+            print(f"|  | decided at {DECIDE} with a right pose among the two: {int(decided.sum())}, of them wrong: "
+                  f"{int((decided & (side != truth)).sum())}; with neither right: {int(((~one) & (side != 0)).sum())} "
+                  "decided | | | | |")
     if len(sets) == 2:
         same = np.array_equal(sets[0]["labels"], sets[1]["labels"])
         print(f"look change ({sample_paths[0]} -> {sample_paths[1]}; same labels: {same}):")
