@@ -731,7 +731,7 @@ class PoseEstimator:
             position = range_debiased(R_c @ bundle.centre + t_c, reg.tau_m, config.position_range_bias_outline
                                       if fits else config.position_range_bias_registered)
             factors.update(zip(_POSITION_KEYS, (float(v) for v in position)))
-        flip_p, flip_views = self._flip_probability(outline, stereo, left_r, timer)
+        flip_p, flip_input = self._flip_probability(outline, stereo, left_r, timer)
         if flip_p is not None:
             factors["flip_prob"] = flip_p
             fc = bundle.flip_classifier
@@ -743,7 +743,7 @@ class PoseEstimator:
                 return _stage_invalid(stage, "weak_votes", factors), (
                     f"the outline fits loosely ({outline.best.chamfer_px:.2f} px > {sil.max_chamfer_px:g} px) and the "
                     f"flip classifier gives the pose only {flip_p:.3f} (< {fc.loose_fit_min_prob:g})")
-        learned = self._learned_choice(outline, flip_p, reg.tau_m, flip_views, timer)
+        learned = self._learned_choice(outline, flip_p, reg.tau_m, flip_input, timer)
         if outline is not None and outline.decided(sil):
             if conclusive and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:
                 return _stage_invalid(stage, "weak_votes", factors), (
