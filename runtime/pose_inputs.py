@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .errors import ShapeError, check_finite, check_shape
@@ -143,16 +144,26 @@ def _search64(q: np.ndarray, r: np.ndarray, kk: int) -> np.ndarray:
     return np.take_along_axis(part, order, axis=1)
 
 
+def _nearest32(query32: np.ndarray, ref32: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``n`` nearest ``ref32`` rows of each ``query32`` row by float32 squared distance, nearest
+    first: ``(distances (M, n) float32, indices (M, n) int64)`` (OpenCV's brute-force
+    ``batchDistance``, sums of squared differences: within the bound of :data:`_KNN_TOL`)."""
+    d2, idx = cv2.batchDistance(query32, ref32, cv2.CV_32F, normType=cv2.NORM_L2SQR, K=n)
+    return d2, idx.astype(np.int64)
+
+
 def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 1024) -> np.ndarray:
     """Indices (M, k) int64 of the k nearest ``ref`` points of each ``query`` point, nearest first.
 
-    Brute force, ``chunk`` query rows at a time (memory ``chunk * len(ref)`` floats), giving the answer
-    of a float64 search with ties broken by the lower index. Candidates come from float32 distances
-    of coordinates centred on ``ref``'s mean (``k + 4`` per row) and are ranked in float64; a row whose
-    float32 distances cannot tell its k-th neighbour from the first excluded point is searched again
-    in float64 over all of ``ref``. Exactly tied points at the k-th place (duplicates) are
-    interchangeable: which one is kept is deterministic but not necessarily the lowest index. If
-    ``ref`` has fewer than ``k`` points, the farthest found neighbour is repeated to fill the row.
+    Brute force, ``chunk`` query rows at a time, giving the answer of a float64 search with ties
+    broken by the lower index. Candidates come from float32 distances of coordinates centred on
+    ``ref``'s mean (``k + 4`` per row, and the nearest point after them: OpenCV's ``batchDistance``
+    for finite points of at most 4 coordinates, else one float32 matrix product and a partition) and
+    are ranked in float64; a row whose float32 distances cannot tell its k-th neighbour from the first
+    excluded point is searched again in float64 over all of ``ref``. Exactly tied points at the k-th
+    place (duplicates) are interchangeable: which one is kept is deterministic but not necessarily the
+    lowest index. If ``ref`` has fewer than ``k`` points, the farthest found neighbour is repeated to
+    fill the row.
     """
     check_shape(query, (None, None), "query", dtypes=_FLOAT)
     check_shape(ref, (None, query.shape[1]), "ref", dtypes=_FLOAT)
@@ -167,6 +178,9 @@ def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 1024) -
     q_norm = np.sqrt(np.einsum("ij,ij->i", q, q))
     kk = min(k, len(r))
     n_cand = min(kk + _KNN_MARGIN, len(r))
+    # OpenCV's search reads float32 rows of up to 4 coordinates here (and nothing non-finite: its order
+    # of NaN distances is its own); the matrix product and partition cover the rest
+    opencv = q.shape[1] <= 4 and bool(np.isfinite(q32).all() and np.isfinite(r32).all())
     out = np.empty((len(q), kk), dtype=np.int64)
     for start in range(0, len(q), chunk):
         stop = min(start + chunk, len(q))
@@ -174,21 +188,31 @@ def knn_indices(query: np.ndarray, ref: np.ndarray, k: int, chunk: int = 1024) -
         if n_cand == len(r):  # few points: rank them all
             out[start:stop] = _rank_exact(qc, r, np.broadcast_to(np.arange(len(r)), (stop - start, len(r))), kk)
             continue
-        d2 = _squared_distances32(q32[start:stop], r32)
-        rows = np.arange(len(d2))
-        if kk == 1:  # argmin: first minimum = lowest index; re-check rows with a near tie
-            found = np.argmin(d2, axis=1)[:, None]
-            best = d2[rows, found[:, 0]]
-            tol = _tolerance(q_norm[start:stop], best)
-            redo = np.flatnonzero(np.count_nonzero(d2 <= (best + tol)[:, None], axis=1) > 1)
+        q_tol = q_norm[start:stop]
+        if opencv:
+            near, near_i = _nearest32(q32[start:stop], r32, n_cand + 1)   # sorted: candidates, then the next
+            if kk == 1:  # the nearest is found unless the second is as near within the float32 error
+                found = near_i[:, :1]
+                redo = np.flatnonzero(near[:, 1] <= near[:, 0] + _tolerance(q_tol, near[:, 0]))
+            else:
+                found = _rank_exact(qc, r, near_i[:, :n_cand], kk)
+                redo = np.flatnonzero(near[:, n_cand] - near[:, kk - 1] <= _tolerance(q_tol, near[:, n_cand]))
         else:
-            part = np.argpartition(d2, n_cand, axis=1)  # [:n_cand] candidates, [n_cand] the nearest other
-            cand = part[:, :n_cand]
-            kth = np.partition(np.take_along_axis(d2, cand, axis=1), kk - 1, axis=1)[:, kk - 1]
-            other = d2[rows, part[:, n_cand]]
-            found = _rank_exact(qc, r, cand, kk)
-            redo = np.flatnonzero(other - kth <= _tolerance(q_norm[start:stop], other))
+            d2 = _squared_distances32(q32[start:stop], r32)
+            rows = np.arange(len(d2))
+            if kk == 1:  # argmin: first minimum = lowest index; re-check rows with a near tie
+                found = np.argmin(d2, axis=1)[:, None]
+                best = d2[rows, found[:, 0]]
+                redo = np.flatnonzero(np.count_nonzero(d2 <= (best + _tolerance(q_tol, best))[:, None], axis=1) > 1)
+            else:
+                part = np.argpartition(d2, n_cand, axis=1)  # [:n_cand] candidates, [n_cand] the nearest other
+                cand = part[:, :n_cand]
+                kth = np.partition(np.take_along_axis(d2, cand, axis=1), kk - 1, axis=1)[:, kk - 1]
+                other = d2[rows, part[:, n_cand]]
+                found = _rank_exact(qc, r, cand, kk)
+                redo = np.flatnonzero(other - kth <= _tolerance(q_tol, other))
         if redo.size:
+            found = found.copy()
             found[redo] = _search64(qc[redo], r, kk)
         out[start:stop] = found
     if kk < k:

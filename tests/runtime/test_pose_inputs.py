@@ -56,6 +56,23 @@ class TestKnn:
         np.testing.assert_array_equal(knn_indices(query, ref, 8), self._reference(query, ref, 8))
         np.testing.assert_array_equal(knn_indices(query, ref, 1), self._reference(query, ref, 1))
 
+    @pytest.mark.parametrize("dim", [2, 3, 6])
+    def test_exact_on_grids_full_of_ties(self, dim):
+        """Points on a coarse grid tie everywhere: OpenCV's float32 search (up to 4 coordinates) and the
+        matrix product (more) both end in the float64 answer, ties by index, up to which of the points
+        tied at the k-th place is kept (the docstring)."""
+        rng = np.random.default_rng(dim)
+        ref = np.round(rng.normal(size=(700, dim)) * 8.0) / 8.0 + 5.0
+        query = np.concatenate([ref[:200], np.round(rng.normal(size=(100, dim)) * 16.0) / 16.0 + 5.0])
+        d2 = ((query[:, None, :] - ref[None, :, :]) ** 2).sum(-1)
+        ranked = np.sort(d2, axis=1)
+        for k in (1, 5, 16):
+            idx, want = knn_indices(query, ref, k, chunk=128), self._reference(query, ref, k)
+            np.testing.assert_array_equal(np.take_along_axis(d2, idx, axis=1), ranked[:, :k])
+            untied = ranked[:, k - 1] < ranked[:, k]   # tied at the k-th place: any of the tied may be kept
+            assert untied.sum() > 60 and (~untied).any() or k == 1
+            np.testing.assert_array_equal(idx[untied], want[untied])
+
     def test_ties_go_to_lower_index(self):
         ref = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0]])
         np.testing.assert_array_equal(knn_indices(np.zeros((1, 3)), ref, 3), [[0, 1, 2]])

@@ -108,6 +108,42 @@ def test_splat_matches_opencv_projection():
     np.testing.assert_array_equal(mask, cv2.morphologyEx(raw, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)))
 
 
+def _splat_per_point(points, R, t, frame):
+    """The splat as it was until session 39: (S, 3) points projected row by row (the reference the
+    row-wise, in-place splat must equal bit for bit)."""
+    n = frame.size
+    X = points @ np.asarray(R, dtype=points.dtype).T + np.asarray(t, dtype=points.dtype)
+    K32 = frame.K.astype(points.dtype)
+    z = np.maximum(X[:, 2], 1e-6)
+    uv = np.empty((len(X), 2), dtype=np.result_type(X, K32))
+    np.add(K32[0, 0] * X[:, 0] / z, K32[0, 2], out=uv[:, 0])
+    np.add(K32[1, 1] * X[:, 1] / z, K32[1, 2], out=uv[:, 1])
+    if not np.isfinite(uv).all():
+        uv = np.nan_to_num(uv, nan=-1.0)
+    np.clip(uv, -1.0, float(n), out=uv)
+    ij = np.rint(uv, out=uv).astype(np.int32)
+    u = ij.view(np.uint32)
+    inside = (u[:, 0] < n) & (u[:, 1] < n) & (X[:, 2] > 1e-3)
+    mask = np.zeros((n, n), np.uint8)
+    mask.reshape(-1)[(ij[:, 1].astype(np.int64) * n + ij[:, 0])[inside]] = 1
+    return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)), ij, inside
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_splat_equals_the_per_point_projection_bit_for_bit(dtype):
+    """Random poses, points behind the camera and off the frame, and a NaN pose."""
+    rng = np.random.default_rng(39)
+    pts = rng.uniform(-3.0, 3.0, (6000, 3)).astype(dtype)
+    frame = silhouette_frame(K, 150, 90, 320, 192)
+    poses = [_pose(rng.uniform(-180, 180, 3), (rng.uniform(-2, 2), rng.uniform(-2, 2), z))
+             for z in (0.5, 2.0, 15.0, 25.0, 60.0)]
+    poses.append((np.full((3, 3), np.nan), np.zeros(3)))
+    for R, t in poses:
+        got, want = splat_mask(pts, R, t, frame), _splat_per_point(pts, R, t, frame)
+        for a, b in zip(got, want):
+            np.testing.assert_array_equal(a, b)
+
+
 def test_contour_is_the_mask_pixels_with_a_background_neighbour():
     mask = (np.random.default_rng(6).uniform(size=(40, 50)) < 0.7).astype(np.uint8)
     padded = np.pad(mask, 1)
