@@ -52,14 +52,14 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .errors import check_shape
+from .errors import ShapeError, check_shape
 from .image_vote import ImageVote, crop_to_frame, image_vote, window_grey
 from .outline_search import OutlineTemplates, search_outline
 from .registration import SurfaceModel, cross_into, exp_so3, rotation_angle_deg
 
 __all__ = ["SilhouetteConfig", "SilhouetteFrame", "OutlineFit", "OutlineDecision", "silhouette_frame",
            "splat_mask", "observed_mask", "contour", "chamfer_px", "points_residual", "refine_outline",
-           "decide_outline", "polish_pose", "align_centroid"]
+           "decide_outline", "polish_pose", "align_centroid", "ObservedEdges", "observed_edges"]
 
 _KERNEL = np.ones((3, 3), np.uint8)
 
@@ -361,15 +361,41 @@ def points_residual(R: np.ndarray, t: np.ndarray, points: np.ndarray, surface: S
     return float(e.mean())
 
 
+@dataclass(frozen=True, eq=False)
+class ObservedEdges:
+    """What every refinement against one observed (n, n) outline reads: its contour pixels ``ex``, ``ey``
+    (row-major order) and ``flat`` (their row-major indices), and per frame pixel the distance to the
+    nearest of them (``dist``, OpenCV's 5x5 L2 distance transform) and which one it is (``label``, k + 1
+    for the k-th contour pixel). Made once per outline by :func:`observed_edges`."""
+
+    ex: np.ndarray
+    ey: np.ndarray
+    flat: np.ndarray
+    dist: np.ndarray
+    label: np.ndarray
+
+
+def observed_edges(observed: np.ndarray) -> ObservedEdges:
+    """The :class:`ObservedEdges` of an observed (n, n) outline mask."""
+    check_shape(observed, (None, None), "observed")
+    edge = contour(observed)
+    dist, labels = cv2.distanceTransformWithLabels((~edge).astype(np.uint8), cv2.DIST_L2, 5,
+                                                   labelType=cv2.DIST_LABEL_PIXEL)
+    ey, ex = np.nonzero(edge)   # label k (1-based) is the k-th edge pixel in row-major order
+    return ObservedEdges(ex=ex, ey=ey, flat=ey.astype(np.int64) * edge.shape[1] + ex, dist=dist.reshape(-1),
+                         label=labels.reshape(-1))
+
+
 def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, observed: np.ndarray,
                    frame: SilhouetteFrame, config: SilhouetteConfig = SilhouetteConfig(), *,
                    stereo_points: np.ndarray | None = None, surface: SurfaceModel | None = None,
-                   tau_m: float = 0.5) -> OutlineFit:
+                   tau_m: float = 0.5, edges: ObservedEdges | None = None) -> OutlineFit:
     """Gauss-Newton refinement of (R, t) against the ``observed`` (n, n) outline (module docstring).
 
     ``stereo_points`` (N, 3, camera frame) with the target's ``surface`` add the point-to-plane
     residuals (noise ``tau_m``). A step that the data cannot support (too few residuals, a
-    singular system) ends the refinement; the pose so far is returned.
+    singular system) ends the refinement; the pose so far is returned. ``edges``: the outline's
+    :func:`observed_edges`, when several poses are refined against it (made here otherwise).
     """
     check_shape(silhouette_points, (None, 3), "silhouette_points")
     check_shape(observed, (frame.size, frame.size), "observed")
@@ -378,12 +404,11 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
     R = np.asarray(R, dtype=np.float64).copy()
     t = np.asarray(t, dtype=np.float64).copy()
     Kf = frame.K
-    edge = contour(observed)
-    dist, labels = cv2.distanceTransformWithLabels((~edge).astype(np.uint8), cv2.DIST_L2, 5,
-                                                   labelType=cv2.DIST_LABEL_PIXEL)
-    ey, ex = np.nonzero(edge)   # label k (1-based) is the k-th edge pixel in row-major order
-    e_flat = ey.astype(np.int64) * edge.shape[1] + ex
-    dist_flat, labels_flat = dist.reshape(-1), labels.reshape(-1)
+    if edges is None:
+        edges = observed_edges(observed)
+    elif len(edges.dist) != observed.size:
+        raise ShapeError(f"edges are of a {len(edges.dist)}-pixel outline, observed has {observed.size}")
+    ey, ex, e_flat, dist_flat, labels_flat = edges.ey, edges.ex, edges.flat, edges.dist, edges.label
     rng = np.random.default_rng(config.seed)
     P = None
     if stereo_points is not None and surface is not None and config.stereo_points > 0:
@@ -556,9 +581,11 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
     observed = observed_mask(np.asarray(disparity, dtype=np.float32), frame,
                              float(K_full[0, 0]) * float(baseline_m) / max(far, 1e-6))
 
+    edges = observed_edges(observed)
+
     def fit(R: np.ndarray, t: np.ndarray) -> OutlineFit:
         return refine_outline(R, t, silhouette_points, observed, frame, config, stereo_points=stereo_points,
-                              surface=surface, tau_m=tau_m)
+                              surface=surface, tau_m=tau_m, edges=edges)
 
     candidates = list(candidates)
     if templates is not None and config.search_candidates > 0:
