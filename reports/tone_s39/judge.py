@@ -1,0 +1,147 @@
+"""Session 39: the clauses of reports/tone_s39/rule.txt (cand: the shipped bundle with flip_classifier.decide_tone_gamma
+2.0; base: the shipped bundle), round 2 of session 38's rule 1.
+
+    python reports/tone_s39/judge.py collect   # once: rows of RUNS -> compact files beside this file
+    python reports/tone_s39/judge.py           # the clauses and the verdict, from the files beside this file and
+                                               # round 1's (reports/tone_s38)
+
+``collect`` cuts ``RUNS/check_{base,cand}_{plain,rest}.json.gz`` (``spacepose.tools.shard_eval`` rows) to the columns
+read here and merges the ``sequence eval`` reports ``RUNS/{base,cand}_seq_y*.json`` into ``seq_{base,cand}.json.gz``
+(a row per frame, with its sequence's name). RUNS: ``/tmp/s39/w/runs/s39`` (the checkout the check ran from) or the
+first argument after ``collect``.
+"""
+from __future__ import annotations
+
+import gzip
+import json
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROUND1 = HERE.parent / "tone_s38"
+RUNS = Path("/tmp/s39/w/runs/s39")
+WRONG_T_M, WRONG_R_DEG, FAR_DEG = 0.5, 20.0, 90.0
+WITHIN_T_M, WITHIN_R_DEG = 0.10, 2.0
+BUNDLES = ("base", "cand")
+KEYS = ("frame", "regime", "distance", "valid", "status", "confidence", "e_t", "e_R", "flip_prob", "outline_chamfer_px",
+        "outline_margin_px", "depth_tolerance_m", "decided_by", "tracked", "position_valid", "e_pos")
+
+
+def collect(runs: Path) -> None:
+    from spacepose.tools.shard_eval import write_rows
+
+    for b in BUNDLES:
+        for s in ("plain", "rest"):
+            doc = json.loads(gzip.decompress((runs / f"check_{b}_{s}.json.gz").read_bytes()))
+            doc["frames"] = [{k: r.get(k) for k in KEYS if k in r} for r in doc["frames"]]
+            doc["cut_to"] = list(KEYS)
+            write_rows(doc, HERE / f"check_{b}_{s}.json.gz")
+        rows = []
+        for path in sorted(runs.glob(f"{b}_seq_y*.json")):
+            seq = path.stem[len(b) + 1:]
+            rows += [{"seq": seq, **{k: r.get(k) for k in KEYS if k in r}}
+                     for r in json.loads(path.read_text())["frames"]]
+        if len({r["seq"] for r in rows}) != 24:
+            raise SystemExit(f"{b}: {len({r['seq'] for r in rows})} sequences, want 24")
+        write_rows({"frames": rows, "cut_to": ["seq", *KEYS]}, HERE / f"seq_{b}.json.gz")
+
+
+def _load(folder: Path, name: str) -> list[dict]:
+    return json.loads(gzip.decompress((folder / f"{name}.json.gz").read_bytes()))["frames"]
+
+
+def _wrong(r: dict) -> bool:
+    return bool(r["valid"]) and (r["e_t"] > WRONG_T_M or r["e_R"] > WRONG_R_DEG)
+
+
+def _within(r: dict) -> bool:
+    return bool(r["valid"]) and r["e_t"] <= WITHIN_T_M and r["e_R"] <= WITHIN_R_DEG
+
+
+def _far(r: dict) -> bool:
+    return bool(r["valid"]) and r["e_R"] > FAR_DEG
+
+
+def _valid(r: dict) -> bool:
+    return bool(r["valid"])
+
+
+def sets(folder: Path, restyled_prefix: str) -> dict[str, dict[str, dict[tuple, dict]]]:
+    """{set: {"base" | "cand": {(sequence, frame): row}}} for F, R, S and SR of one round."""
+    out: dict = {}
+    for b in BUNDLES:
+        out.setdefault("F", {})[b] = {(r.get("seq", ""), r["frame"]): r for r in _load(folder, f"check_{b}_plain")}
+        out.setdefault("R", {})[b] = {(r.get("seq", ""), r["frame"]): r for r in _load(folder, f"check_{b}_rest")}
+        seq = _load(folder, f"seq_{b}")
+        out.setdefault("S", {})[b] = {(r["seq"], r["frame"]): r for r in seq if not r["seq"].startswith(restyled_prefix)}
+        out.setdefault("SR", {})[b] = {(r["seq"], r["frame"]): r for r in seq if r["seq"].startswith(restyled_prefix)}
+    for name, by in out.items():
+        if by["base"].keys() != by["cand"].keys():
+            raise SystemExit(f"{name}: base and cand rows are not of the same frames")
+    return out
+
+
+def table(data: dict, title: str) -> None:
+    print(title)
+    print("| set | bundle | frames | valid | within | wrong | far | tracked valid |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, by in data.items():
+        for b, rows in by.items():
+            v = list(rows.values())
+            print(f"| {name} | {b} | {len(v)} | {sum(map(_valid, v))} | {sum(map(_within, v))} | "
+                  f"{sum(map(_wrong, v))} | {sum(map(_far, v))} | {sum(bool(r['valid'] and r.get('tracked')) for r in v)} |")
+
+
+def judge() -> int:
+    data = sets(HERE, "seq_yr")
+    round1 = sets(ROUND1, "seq_zr")
+    table(data, "round 2 (this session's fresh sets); base: the shipped bundle; cand: decide_tone_gamma 2.0")
+    table(round1, "round 1 (session 38's sets; its base had the image gates of before rule 2)")
+
+    def pooled(d: dict, names: tuple[str, ...], b: str, test) -> int:
+        return sum(test(r) for n in names for r in d[n][b].values())
+
+    clauses = {}
+    new_far = [(n, k) for n, by in data.items() for k, r in by["cand"].items() if _far(r) and not _far(by["base"][k])]
+    clauses["V1 no new far pose"] = not new_far
+    print("V1: cand's far poses that base does not report:", new_far)
+    v2 = []
+    for names in (("F", "R"), ("S", "SR")):
+        w = {b: pooled(data, names, b, _wrong) for b in BUNDLES}
+        print(f"V2 {'+'.join(names)}: wrong cand {w['cand']} vs base {w['base']}")
+        v2.append(w["cand"] <= w["base"])
+    clauses["V2 no more wrong"] = all(v2)
+    refused = [(rnd, n, k, by["base"][k]) for rnd, d in (("round 2", data), ("round 1", round1)) for n, by in d.items()
+               for k, r in by["cand"].items() if by["base"][k]["valid"] and not r["valid"]]
+    d_wrong = sum(_wrong(r) for *_, r in refused)
+    names = tuple(data)
+    base_valid = pooled(data, names, "base", _valid) + pooled(round1, names, "base", _valid)
+    base_wrong = pooled(data, names, "base", _wrong) + pooled(round1, names, "base", _wrong)
+    share_d, share_b = d_wrong / max(len(refused), 1), base_wrong / max(base_valid, 1)
+    print(f"V3 (both rounds): D = {len(refused)} poses base reports and cand refuses, {d_wrong} of them wrong "
+          f"({100 * share_d:.1f} %); base: {base_wrong} wrong of {base_valid} valid ({100 * share_b:.2f} %)")
+    for rnd, n, k, r in refused:
+        if rnd == "round 2":
+            print(f"    {n} {k[0]} {k[1]}: e_t {r['e_t']:.2f} m, e_R {r['e_R']:.1f} deg, {r['decided_by']}, "
+                  f"confidence {r['confidence']:.2f}" + (" WRONG" if _wrong(r) else ""))
+    clauses["V3 the refused are the wrong"] = d_wrong >= 2 and share_d >= 2.0 * share_b
+    v4 = []
+    for names_, (bar_v, bar_w) in ((("F", "R"), (0.90, 0.93)), (("S", "SR"), (0.95, 0.95))):
+        v = {b: pooled(data, names_, b, _valid) for b in BUNDLES}
+        w = {b: pooled(data, names_, b, _within) for b in BUNDLES}
+        print(f"V4 {'+'.join(names_)}: valid cand {v['cand']} vs base {v['base']} ({v['cand'] / max(v['base'], 1):.3f}, "
+              f"bar {bar_v}); within cand {w['cand']} vs base {w['base']} ({w['cand'] / max(w['base'], 1):.3f}, bar {bar_w})")
+        v4.append(v["cand"] >= bar_v * v["base"] and w["cand"] >= bar_w * w["base"])
+    clauses["V4 the cost"] = all(v4)
+    for name, ok in clauses.items():
+        print(f"{name}: {'holds' if ok else 'FAILS'}")
+    met = all(clauses.values())
+    print("verdict:", "MET: decide_tone_gamma 2.0 ships" if met else "NOT MET: nothing of it ships")
+    return 0
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["collect"]:
+        collect(Path(sys.argv[2]) if len(sys.argv) > 2 else RUNS)
+    else:
+        raise SystemExit(judge())
