@@ -17,8 +17,8 @@ from spacepose.errors import BundleError, ShapeError  # noqa: E402
 from spacepose.flip import flipped_pose  # noqa: E402
 from spacepose.registration import SurfaceModel, rotation_angle_deg  # noqa: E402
 from spacepose.silhouette import (OutlineDecision, SilhouetteConfig, align_centroid, chamfer_px,  # noqa: E402
-                                  contour, decide_outline, observed_mask, polish_pose, refine_outline, silhouette_frame,
-                                  splat_mask)
+                                  contour, decide_outline, observed_edges, observed_mask, polish_pose, refine_outline,
+                                  silhouette_frame, splat_mask)
 
 K = np.array([[800.0, 0, 319.5], [0, 800.0, 239.5], [0, 0, 1]])
 CENTRE = np.zeros(3)
@@ -219,6 +219,31 @@ def test_refinement_recovers_a_perturbed_pose(plate):
     assert rotation_angle_deg(fit.R, R) < 1.5 < rotation_angle_deg(R0, R)
     assert np.linalg.norm(fit.t - t) < 0.1
     assert fit.chamfer_px < 0.6 < start.chamfer_px
+
+
+def test_refinement_with_the_outline_edges_made_once_is_the_same(plate):
+    """decide_outline makes the observed outline's edges once for all its candidates: a refinement given them
+    returns what it returns when it makes them itself, bit for bit; edges of another outline are refused."""
+    pts, nrm = plate
+    R, t = _pose()
+    frame = silhouette_frame(K, 160, 80, 320, 192)
+    obs = observed_mask(_disparity_of(pts, R, t), frame, 10.0)
+    edges = observed_edges(obs)
+    assert np.array_equal(np.stack([edges.ey, edges.ex], axis=1), np.argwhere(contour(obs)))
+    assert np.all(edges.label[edges.flat] == np.arange(1, len(edges.flat) + 1)) and np.all(edges.dist[edges.flat] == 0)
+    cam = pts @ R.T + t
+    stereo = cam[np.einsum("ij,ij->i", nrm @ R.T, cam) < 0][::10]
+    surface = SurfaceModel(pts, nrm)
+    for deg in (4.0, 9.0):
+        dR = Rotation.from_rotvec(np.radians(deg) * np.array([0.6, -0.5, 0.62])).as_matrix()
+        R0, t0 = dR @ R, t + np.array([0.15, -0.1, 0.3])
+        own = refine_outline(R0, t0, pts, obs, frame, stereo_points=stereo, surface=surface, tau_m=0.2)
+        given = refine_outline(R0, t0, pts, obs, frame, stereo_points=stereo, surface=surface, tau_m=0.2, edges=edges)
+        assert np.array_equal(own.R, given.R) and np.array_equal(own.t, given.t)
+        assert own.chamfer_px == given.chamfer_px and own.points_res == given.points_res
+    other = observed_edges(observed_mask(_disparity_of(pts, R, t), silhouette_frame(K, 160, 80, 320, 96), 10.0))
+    with pytest.raises(ShapeError, match="edges"):
+        refine_outline(R, t, pts, obs, frame, edges=other)
 
 
 def test_range_weight_keeps_a_fattened_outline_from_pulling_the_pose_near(plate):
