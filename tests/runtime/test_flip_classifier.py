@@ -546,14 +546,15 @@ def test_the_shipped_bundle_caps_the_polish_of_decided_poses():
     assert shipped.silhouette.max_refused_track_polish_deg == 3.0
 
 
-def test_the_shipped_bundle_has_the_gates_of_sessions_35_and_38():
+def test_the_shipped_bundle_has_the_gates_of_sessions_35_38_and_39():
     """reports/gates_s35/rule2.txt shipped four gate values re-derived on session 19's stereo graph; the classifier's
     decide / veto / chamfer gates stayed (round 1, with them looser, let through a pose 174.5 deg off).
     reports/tone_s38/rule2.txt shipped the image route's margin 0.1 -> 0 and score 0.1 -> 0.05; rule.txt's tone
-    check (decide_tone_gamma 2) was not met and is off."""
+    check (decide_tone_gamma 2) was not met in session 38 and met in its second round, reports/tone_s39/rule.txt:
+    on since session 39."""
     bundle = load_bundle(None, verify_graphs=False)
     sil, fc = bundle.silhouette, bundle.flip_classifier
     assert (sil.min_margin_px, sil.image_min_margin_px, sil.image_veto_score) == (1.0, 0.0, -0.5)
     assert fc.max_depth_tolerance_m == 1.0
-    assert (fc.decide_prob, fc.veto_prob, fc.max_chamfer_px, fc.decide_tone_gamma) == (0.995, 0.05, 1.5, 1.0)
+    assert (fc.decide_prob, fc.veto_prob, fc.max_chamfer_px, fc.decide_tone_gamma) == (0.995, 0.05, 1.5, 2.0)
     assert (sil.max_chamfer_px, sil.image_min_score, sil.image_max_chamfer_px) == (1.5, 0.05, 2.0)
