@@ -62,7 +62,8 @@ class FlipClassifierConfig:
         grey plane raised to the powers ``g`` and ``1 / g`` as well (other renderers' tone curves; ``g`` 2 is
         the end of the classifier's training augmentation, :func:`spacepose.tools.flip_data.augment_views`);
         1: no such check. On a restyled frame of session 37 the classifier decided a pose 178.9° off at p
-        0.9998 that it gives 0.991 with its grey plane's tone curve raised to 1/2 (session 38).
+        0.9998 that it gives 0.991 with its grey plane's tone curve raised to 1/2 (session 38). The shipped
+        bundle sets 2 since session 39 (``reports/tone_s39/rule.txt``).
     """
 
     file: str = "flip.onnx"
