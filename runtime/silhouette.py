@@ -251,7 +251,10 @@ def splat_mask(points: np.ndarray, R: np.ndarray, t: np.ndarray, frame: Silhouet
 
     Returns ``(mask (n, n) uint8 after a 3x3 closing, pixel (S, 2) int column/row, inside (S,) bool)``.
     """
-    mask, ij, _, inside = _splat(np.ascontiguousarray(np.asarray(points).T), R, t, frame)
+    points = np.asarray(points)
+    if points.dtype not in (np.float32, np.float64):
+        points = points.astype(np.float64)
+    mask, ij, _, inside = _splat(np.ascontiguousarray(points.T), R, t, frame)
     return mask, ij.T, inside
 
 
