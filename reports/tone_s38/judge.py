@@ -24,27 +24,28 @@ KEYS = ("frame", "regime", "distance", "valid", "status", "confidence", "e_t", "
         "outline_margin_px", "depth_tolerance_m", "decided_by", "tracked", "position_valid", "e_pos")
 
 
-def collect(modes: list[str]) -> None:
+def collect(modes: list[str], runs: Path = RUNS, out: Path = HERE, seq_glob: str = "seq_z*") -> None:
+    """The rows of ``runs`` cut to :data:`KEYS` into ``out`` (module docstring); ``seq_glob``: the sequences' names."""
     from spacepose.tools.shard_eval import write_rows
 
     for b in modes or BUNDLES:
         for s in ("plain", "rest"):
-            doc = json.loads(gzip.decompress((RUNS / f"check_{b}_{s}.json.gz").read_bytes()))
+            doc = json.loads(gzip.decompress((runs / f"check_{b}_{s}.json.gz").read_bytes()))
             doc["frames"] = [{k: r.get(k) for k in KEYS if k in r} for r in doc["frames"]]
             doc["cut_to"] = list(KEYS)
-            write_rows(doc, HERE / f"check_{b}_{s}.json.gz")
+            write_rows(doc, out / f"check_{b}_{s}.json.gz")
         rows = []
-        for path in sorted(RUNS.glob(f"{b}_seq_z*.json")):
+        for path in sorted(runs.glob(f"{b}_{seq_glob}.json")):
             seq = path.stem[len(b) + 1:]
             rows += [{"seq": seq, **{k: r.get(k) for k in KEYS if k in r}}
                      for r in json.loads(path.read_text())["frames"]]
         if len({r["seq"] for r in rows}) != 24:
             raise SystemExit(f"{b}: {len({r['seq'] for r in rows})} sequences, want 24")
-        write_rows({"frames": rows, "cut_to": ["seq", *KEYS]}, HERE / f"seq_{b}.json.gz")
+        write_rows({"frames": rows, "cut_to": ["seq", *KEYS]}, out / f"seq_{b}.json.gz")
 
 
-def _load(name: str) -> list[dict]:
-    return json.loads(gzip.decompress((HERE / f"{name}.json.gz").read_bytes()))["frames"]
+def _load(name: str, folder: Path = HERE) -> list[dict]:
+    return json.loads(gzip.decompress((folder / f"{name}.json.gz").read_bytes()))["frames"]
 
 
 def _wrong(r: dict) -> bool:
@@ -63,20 +64,35 @@ def _key(r: dict) -> tuple:
     return (r.get("seq", ""), r["frame"])
 
 
-def sets(cand: str = "cand") -> dict[str, dict[str, dict[tuple, dict]]]:
-    """{set: {"base" | "cand": {(sequence, frame): row}}} for F, R, S and SR; "cand" holds ``cand``'s rows."""
+def sets(cand: str = "cand", folder: Path = HERE, restyled_prefix: str = "seq_zr"
+         ) -> dict[str, dict[str, dict[tuple, dict]]]:
+    """{set: {"base" | "cand": {(sequence, frame): row}}} for F, R, S and SR of the rows in ``folder``; "cand" holds
+    ``cand``'s rows; sequences named ``restyled_prefix``... are SR."""
     out: dict = {}
     for b in BUNDLES:
         stem = cand if b == "cand" else b
-        out.setdefault("F", {})[b] = {_key(r): r for r in _load(f"check_{stem}_plain")}
-        out.setdefault("R", {})[b] = {_key(r): r for r in _load(f"check_{stem}_rest")}
-        seq = _load(f"seq_{stem}")
-        out.setdefault("S", {})[b] = {_key(r): r for r in seq if not r["seq"].startswith("seq_zr")}
-        out.setdefault("SR", {})[b] = {_key(r): r for r in seq if r["seq"].startswith("seq_zr")}
+        out.setdefault("F", {})[b] = {_key(r): r for r in _load(f"check_{stem}_plain", folder)}
+        out.setdefault("R", {})[b] = {_key(r): r for r in _load(f"check_{stem}_rest", folder)}
+        seq = _load(f"seq_{stem}", folder)
+        out.setdefault("S", {})[b] = {_key(r): r for r in seq if not r["seq"].startswith(restyled_prefix)}
+        out.setdefault("SR", {})[b] = {_key(r): r for r in seq if r["seq"].startswith(restyled_prefix)}
     for name, by in out.items():
         if by["base"].keys() != by["cand"].keys():
             raise SystemExit(f"{name}: base and cand rows are not of the same frames")
     return out
+
+
+def table(data: dict, title: str) -> None:
+    """Print ``title`` and a row per set and bundle: frames, valid, within, wrong, far, tracked valid."""
+    print(title)
+    print("| set | bundle | frames | valid | within | wrong | far | tracked valid |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, by in data.items():
+        for b, rows in by.items():
+            v = list(rows.values())
+            print(f"| {name} | {b} | {len(v)} | {sum(bool(r['valid']) for r in v)} | {sum(map(_within, v))} | "
+                  f"{sum(map(_wrong, v))} | {sum(map(_far, v))} | "
+                  f"{sum(bool(r['valid'] and r.get('tracked')) for r in v)} |")
 
 
 def _rule1_rest(data: dict, clauses: dict, pooled, valid) -> None:
@@ -108,15 +124,7 @@ def _rule1_rest(data: dict, clauses: dict, pooled, valid) -> None:
 def judge(cand: str = "cand") -> int:
     """rule.txt's clauses (``cand``) or rule2.txt's (``cand2``); prints them and the verdict."""
     data = sets(cand)
-    print(f"base: the shipped bundle; cand: {cand}")
-    print("| set | bundle | frames | valid | within | wrong | far | tracked valid |")
-    print("|---|---|---|---|---|---|---|---|")
-    for name, by in data.items():
-        for b, rows in by.items():
-            v = list(rows.values())
-            print(f"| {name} | {b} | {len(v)} | {sum(bool(r['valid']) for r in v)} | {sum(map(_within, v))} | "
-                  f"{sum(map(_wrong, v))} | {sum(map(_far, v))} | "
-                  f"{sum(bool(r['valid'] and r.get('tracked')) for r in v)} |")
+    table(data, f"base: the shipped bundle; cand: {cand}")
 
     def pooled(names: tuple[str, ...], b: str, test) -> int:
         return sum(test(r) for n in names for r in data[n][b].values())

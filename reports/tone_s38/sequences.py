@@ -24,20 +24,32 @@ def sequences() -> list[tuple[str, int, int, str, int]]:
     return s30.sequences("check_s38")
 
 
-def main(argv: list[str]) -> int:
-    what, modes = (argv[0] if argv else "render"), argv[1:] or ["base"]
-    for i, (name, seed, distance, regime, rate) in enumerate(sequences()):
-        restyled = name.replace("seq_z", "seq_zr")
+def commands(what: str, modes: list[str], plain: list[tuple[str, int, int, str, int]], *, prefixes: tuple[str, str],
+             restyle_seed: int, session: str) -> list[str]:
+    """The render-and-restyle command (``what`` "render") or the eval commands (else: one per folder and mode; base:
+    the shipped bundle, else ``/tmp/<session>/bundles/<mode>``, reports to ``runs/<session>/``) of the ``plain``
+    sequences (:func:`sequences`) and their restyled copies (``prefixes``: the plain names' prefix and the restyled
+    copies' in its place; restyle seeds from ``restyle_seed``)."""
+    out = []
+    for i, (name, seed, distance, regime, rate) in enumerate(plain):
+        restyled = name.replace(*prefixes)
         if what == "render":
-            print(f"python -m spacepose.tools.sequence render data/{name} --frames 40 --distance {distance} "
-                  f"--rate {rate} --regime {regime} --seed {seed} && python -m spacepose.tools.restyle data/{name} "
-                  f"data/{restyled} --seed {RESTYLE_SEED + i} --split test")
+            out.append(f"python -m spacepose.tools.sequence render data/{name} --frames 40 --distance {distance} "
+                       f"--rate {rate} --regime {regime} --seed {seed} && python -m spacepose.tools.restyle "
+                       f"data/{name} data/{restyled} --seed {restyle_seed + i} --split test")
             continue
         for folder in (name, restyled):
             for mode in modes:
-                bundle = "" if mode == "base" else f" --bundle /tmp/s38/bundles/{mode}"
-                print(f"python -m spacepose.tools.sequence eval data/{folder} --threads 1{bundle} "
-                      f"--json runs/s38/{mode}_{folder}.json")
+                bundle = "" if mode == "base" else f" --bundle /tmp/{session}/bundles/{mode}"
+                out.append(f"python -m spacepose.tools.sequence eval data/{folder} --threads 1{bundle} "
+                           f"--json runs/{session}/{mode}_{folder}.json")
+    return out
+
+
+def main(argv: list[str]) -> int:
+    what, modes = (argv[0] if argv else "render"), argv[1:] or ["base"]
+    print("\n".join(commands(what, modes, sequences(), prefixes=("seq_z", "seq_zr"),
+                             restyle_seed=RESTYLE_SEED, session="s38")))
     return 0
 
 

@@ -33,12 +33,14 @@ def summary(path: Path) -> dict:
             "frames_valid": {r["frame"] for r in valid}}
 
 
-def main() -> int:
+def print_table(sets: dict[str, tuple[str, ...]], labels: tuple[str, ...], before: int, after: int) -> None:
+    """A table row per set (its row files, relative to ``reports/``) and label, then, where every file exists, how
+    many valid frames labels ``before`` and ``after`` (indices) share."""
     print("| set | bundle | valid | mean e_t / e_R | median e_t / e_R | within 0.10 m / 2° | wrong | > 90° | positions |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for name, (before, after) in SETS.items():
+    for name, files in sets.items():
         got = {}
-        for label, rel in (("session 35", before), ("session 38", after)):
+        for label, rel in zip(labels, files):
             path = REPORTS / rel
             if not path.is_file():
                 print(f"| {name} | {label} | (no {rel}) |")
@@ -47,9 +49,13 @@ def main() -> int:
             print(f"| {name} | {label} | {s['valid']} of {s['frames']} ({100 * s['valid'] / s['frames']:.1f} %) | "
                   f"{s['e_t_mean']:.3f} m / {s['e_R_mean']:.2f}° | {s['e_t_median']:.3f} m / {s['e_R_median']:.2f}° | "
                   f"{s['within']} | {s['wrong']} | {s['far']} | {s['positions']} |")
-        if len(got) == 2:
-            a, b = got["session 35"]["frames_valid"], got["session 38"]["frames_valid"]
+        if len(got) == len(labels):
+            a, b = got[labels[before]]["frames_valid"], got[labels[after]]["frames_valid"]
             print(f"|  | valid in both {len(a & b)}, only before {len(a - b)}, only after {len(b - a)} | | | | | | | |")
+
+
+def main() -> int:
+    print_table(SETS, ("session 35", "session 38"), 0, 1)
     return 0
 
 

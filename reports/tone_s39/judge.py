@@ -12,54 +12,29 @@ first argument after ``collect``.
 """
 from __future__ import annotations
 
-import gzip
-import json
+import importlib.util
 import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROUND1 = HERE.parent / "tone_s38"
 RUNS = Path("/tmp/s39/w/runs/s39")
-WRONG_T_M, WRONG_R_DEG, FAR_DEG = 0.5, 20.0, 90.0
-WITHIN_T_M, WITHIN_R_DEG = 0.10, 2.0
-BUNDLES = ("base", "cand")
-KEYS = ("frame", "regime", "distance", "valid", "status", "confidence", "e_t", "e_R", "flip_prob", "outline_chamfer_px",
-        "outline_margin_px", "depth_tolerance_m", "decided_by", "tracked", "position_valid", "e_pos")
+
+
+def _round1_judge():
+    """Session 38's judge (its row helpers and definitions serve both rounds)."""
+    spec = importlib.util.spec_from_file_location("tone_s38_judge", ROUND1 / "judge.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_s38 = _round1_judge()
+BUNDLES, _wrong, _within, _far, table = _s38.BUNDLES, _s38._wrong, _s38._within, _s38._far, _s38.table
 
 
 def collect(runs: Path) -> None:
-    from spacepose.tools.shard_eval import write_rows
-
-    for b in BUNDLES:
-        for s in ("plain", "rest"):
-            doc = json.loads(gzip.decompress((runs / f"check_{b}_{s}.json.gz").read_bytes()))
-            doc["frames"] = [{k: r.get(k) for k in KEYS if k in r} for r in doc["frames"]]
-            doc["cut_to"] = list(KEYS)
-            write_rows(doc, HERE / f"check_{b}_{s}.json.gz")
-        rows = []
-        for path in sorted(runs.glob(f"{b}_seq_y*.json")):
-            seq = path.stem[len(b) + 1:]
-            rows += [{"seq": seq, **{k: r.get(k) for k in KEYS if k in r}}
-                     for r in json.loads(path.read_text())["frames"]]
-        if len({r["seq"] for r in rows}) != 24:
-            raise SystemExit(f"{b}: {len({r['seq'] for r in rows})} sequences, want 24")
-        write_rows({"frames": rows, "cut_to": ["seq", *KEYS]}, HERE / f"seq_{b}.json.gz")
-
-
-def _load(folder: Path, name: str) -> list[dict]:
-    return json.loads(gzip.decompress((folder / f"{name}.json.gz").read_bytes()))["frames"]
-
-
-def _wrong(r: dict) -> bool:
-    return bool(r["valid"]) and (r["e_t"] > WRONG_T_M or r["e_R"] > WRONG_R_DEG)
-
-
-def _within(r: dict) -> bool:
-    return bool(r["valid"]) and r["e_t"] <= WITHIN_T_M and r["e_R"] <= WITHIN_R_DEG
-
-
-def _far(r: dict) -> bool:
-    return bool(r["valid"]) and r["e_R"] > FAR_DEG
+    _s38.collect(list(BUNDLES), runs, HERE, "seq_y*")
 
 
 def _valid(r: dict) -> bool:
@@ -68,28 +43,7 @@ def _valid(r: dict) -> bool:
 
 def sets(folder: Path, restyled_prefix: str) -> dict[str, dict[str, dict[tuple, dict]]]:
     """{set: {"base" | "cand": {(sequence, frame): row}}} for F, R, S and SR of one round."""
-    out: dict = {}
-    for b in BUNDLES:
-        out.setdefault("F", {})[b] = {(r.get("seq", ""), r["frame"]): r for r in _load(folder, f"check_{b}_plain")}
-        out.setdefault("R", {})[b] = {(r.get("seq", ""), r["frame"]): r for r in _load(folder, f"check_{b}_rest")}
-        seq = _load(folder, f"seq_{b}")
-        out.setdefault("S", {})[b] = {(r["seq"], r["frame"]): r for r in seq if not r["seq"].startswith(restyled_prefix)}
-        out.setdefault("SR", {})[b] = {(r["seq"], r["frame"]): r for r in seq if r["seq"].startswith(restyled_prefix)}
-    for name, by in out.items():
-        if by["base"].keys() != by["cand"].keys():
-            raise SystemExit(f"{name}: base and cand rows are not of the same frames")
-    return out
-
-
-def table(data: dict, title: str) -> None:
-    print(title)
-    print("| set | bundle | frames | valid | within | wrong | far | tracked valid |")
-    print("|---|---|---|---|---|---|---|---|")
-    for name, by in data.items():
-        for b, rows in by.items():
-            v = list(rows.values())
-            print(f"| {name} | {b} | {len(v)} | {sum(map(_valid, v))} | {sum(map(_within, v))} | "
-                  f"{sum(map(_wrong, v))} | {sum(map(_far, v))} | {sum(bool(r['valid'] and r.get('tracked')) for r in v)} |")
+    return _s38.sets("cand", folder, restyled_prefix)
 
 
 def judge() -> int:

@@ -9,35 +9,28 @@ frame). Reports go to ``runs/s39/<mode>_<name>.json``.
 """
 from __future__ import annotations
 
+import importlib.util
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "sequence_s30"))
-import sequences as s30  # noqa: E402
+_spec = importlib.util.spec_from_file_location("tone_s38_sequences",
+                                               Path(__file__).resolve().parent.parent / "tone_s38" / "sequences.py")
+_s38 = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_s38)          # session 38's commands, and session 30's grids through it
 
-s30.SETS.setdefault("check_s39", (3921, 12, "seq_y"))
+_s38.s30.SETS.setdefault("check_s39", (3921, 12, "seq_y"))
 RESTYLE_SEED = 3941
 
 
 def sequences() -> list[tuple[str, int, int, str, int]]:
     """(name, seed, distance, regime, rate) of every plain sequence."""
-    return s30.sequences("check_s39")
+    return _s38.s30.sequences("check_s39")
 
 
 def main(argv: list[str]) -> int:
     what, modes = (argv[0] if argv else "render"), argv[1:] or ["base"]
-    for i, (name, seed, distance, regime, rate) in enumerate(sequences()):
-        restyled = name.replace("seq_y", "seq_yr")
-        if what == "render":
-            print(f"python -m spacepose.tools.sequence render data/{name} --frames 40 --distance {distance} "
-                  f"--rate {rate} --regime {regime} --seed {seed} && python -m spacepose.tools.restyle data/{name} "
-                  f"data/{restyled} --seed {RESTYLE_SEED + i} --split test")
-            continue
-        for folder in (name, restyled):
-            for mode in modes:
-                bundle = "" if mode == "base" else f" --bundle /tmp/s39/bundles/{mode}"
-                print(f"python -m spacepose.tools.sequence eval data/{folder} --threads 1{bundle} "
-                      f"--json runs/s39/{mode}_{folder}.json")
+    print("\n".join(_s38.commands(what, modes, sequences(), prefixes=("seq_y", "seq_yr"),
+                                  restyle_seed=RESTYLE_SEED, session="s39")))
     return 0
 
 
