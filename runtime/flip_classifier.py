@@ -155,10 +155,14 @@ class FlipClassifier:
         over the full-frame ``window`` ``(x0, y0, side)`` (:func:`spacepose.flip_views.flip_views`)."""
         return flip_views(image, K_full, window, silhouette_points, pose_a, pose_b, self.config.size)[None]
 
+    def _probabilities(self, views: np.ndarray) -> np.ndarray:
+        """(N,) float64 probabilities that the first pose of each of the (N, 3, S, S) ``views`` is the right one."""
+        logit = self.session.run(["logit"], {"views": views})[0].reshape(-1).astype(np.float64)
+        return 1.0 / (1.0 + np.exp(-np.clip(logit, -60.0, 60.0)))
+
     def probability(self, views: np.ndarray) -> float:
         """Probability that the first pose of :meth:`views` is the right one (runs the graph)."""
-        logit = float(self.session.run(["logit"], {"views": views})[0].reshape(-1)[0])
-        return float(1.0 / (1.0 + np.exp(-np.clip(logit, -60.0, 60.0))))
+        return float(self._probabilities(views)[0])
 
     def toned_probabilities(self, views: np.ndarray, gamma: float) -> np.ndarray:
         """(2,) probabilities that the first pose of ``views`` (1, 3, S, S; :meth:`views`) is the right one with
@@ -168,6 +172,4 @@ class FlipClassifier:
             raise ValueError(f"toned_probabilities takes (1, {CHANNELS}, S, S) views, got {views.shape}")
         if not (np.isfinite(gamma) and gamma > 0.0):
             raise ValueError(f"toned_probabilities: gamma must be finite and > 0, got {gamma}")
-        toned = np.concatenate([toned_views(views, gamma), toned_views(views, 1.0 / gamma)])
-        logit = self.session.run(["logit"], {"views": toned})[0].reshape(-1).astype(np.float64)
-        return 1.0 / (1.0 + np.exp(-np.clip(logit, -60.0, 60.0)))
+        return self._probabilities(np.concatenate([toned_views(views, gamma), toned_views(views, 1.0 / gamma)]))

@@ -26,7 +26,8 @@ SETS = {name: (f"pose_{stem}_s38/pose_eval.json.gz", f"pose_{stem}_s39/pose_eval
 
 
 def main() -> int:
-    spec = importlib.util.spec_from_file_location("tone_s38_shipped_summary", REPORTS / "tone_s38" / "shipped_summary.py")
+    spec = importlib.util.spec_from_file_location("tone_s38_shipped_summary",
+                                                  REPORTS / "tone_s38" / "shipped_summary.py")
     s38 = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(s38)                 # session 38's table, on this session's rows
     s38.print_table(SETS, ("session 38 (its machine)", "session 38's bundle, here", "session 39"), 1, 2)
