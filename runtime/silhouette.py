@@ -251,11 +251,17 @@ def splat_mask(points: np.ndarray, R: np.ndarray, t: np.ndarray, frame: Silhouet
 
     Returns ``(mask (n, n) uint8 after a 3x3 closing, pixel (S, 2) int column/row, inside (S,) bool)``.
     """
+    mask, ij, _, inside = _splat(_transposed(points), R, t, frame)
+    return mask, ij.T, inside
+
+
+def _transposed(points: np.ndarray) -> np.ndarray:
+    """(S, 3) points as the C-contiguous (3, S) array :func:`_splat` reads, in their float dtype (float64 for
+    any other)."""
     points = np.asarray(points)
     if points.dtype not in (np.float32, np.float64):
         points = points.astype(np.float64)
-    mask, ij, _, inside = _splat(np.ascontiguousarray(points.T), R, t, frame)
-    return mask, ij.T, inside
+    return np.ascontiguousarray(points.T)
 
 
 def _splat(points_t: np.ndarray, R: np.ndarray, t: np.ndarray, frame: SilhouetteFrame
@@ -402,8 +408,7 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
     """
     check_shape(silhouette_points, (None, 3), "silhouette_points")
     check_shape(observed, (frame.size, frame.size), "observed")
-    if silhouette_points.dtype not in (np.float32, np.float64):
-        silhouette_points = silhouette_points.astype(np.float64)
+    points_t = _transposed(silhouette_points)
     R = np.asarray(R, dtype=np.float64).copy()
     t = np.asarray(t, dtype=np.float64).copy()
     Kf = frame.K
@@ -418,7 +423,6 @@ def refine_outline(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, 
         P = np.asarray(stereo_points, dtype=np.float64)
         P = P[np.all(np.isfinite(P), axis=1)]
         P = P[rng.permutation(len(P))[: config.stereo_points]] if len(P) >= 12 else None
-    points_t = np.ascontiguousarray(silhouette_points.T)
     if len(ey) >= 12:
         for _ in range(config.iterations):
             mask, _, flat, inside = _splat(points_t, R, t, frame)
