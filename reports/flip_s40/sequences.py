@@ -1,0 +1,38 @@
+"""The sequences of session 40's check (reports/flip_s40/rule.txt).
+
+    python reports/flip_s40/sequences.py render        # render + restyle commands
+    python reports/flip_s40/sequences.py eval MODE...  # eval commands (base: the shipped bundle; else /tmp/s40/bundles/MODE)
+
+12 sequences seq_u00..seq_u11, seeds 4021-4032, on session 30's grids (reports/sequence_s30/sequences.py), 40
+frames at 640x480 on the paper rig; their restyled copies seq_ur00..seq_ur11 (restyle seeds 4041-4052, a style per
+frame). Reports go to ``runs/s40/<mode>_<name>.json``.
+"""
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+_spec = importlib.util.spec_from_file_location("tone_s38_sequences",
+                                               Path(__file__).resolve().parent.parent / "tone_s38" / "sequences.py")
+_s38 = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_s38)          # session 38's commands, and session 30's grids through it
+
+_s38.s30.SETS.setdefault("check_s40", (4021, 12, "seq_u"))
+RESTYLE_SEED = 4041
+
+
+def sequences() -> list[tuple[str, int, int, str, int]]:
+    """(name, seed, distance, regime, rate) of every plain sequence."""
+    return _s38.s30.sequences("check_s40")
+
+
+def main(argv: list[str]) -> int:
+    what, modes = (argv[0] if argv else "render"), argv[1:] or ["base"]
+    print("\n".join(_s38.commands(what, modes, sequences(), prefixes=("seq_u", "seq_ur"),
+                                  restyle_seed=RESTYLE_SEED, session="s40")))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
