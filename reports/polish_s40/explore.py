@@ -22,7 +22,12 @@ from the same inputs in these forms, with polish_pose's own caps (15 deg / 1 m f
   points would hold a perfect start: the error the data themselves leave);
 * ``multi1``, ``multi2`` (with ``--multi``): seven polishes, from the decided pose and from it turned by 1 (2) deg
   either way about each camera axis; the one with the lowest chamfer is kept (polish caps measured from the
-  decided pose). Its turn from the decided pose is recorded (``multi*_deg``), since the polish caps read it.
+  decided pose). Its turn from the decided pose is recorded (``multi*_deg``), since the polish caps read it;
+* ``truemask``, ``truemask_truth`` (with ``--truemask``): the polish against the rendered target mask (the
+  dataset's ``mask/``, resampled into the decision's silhouette frame as the stereo outline is) instead of the
+  stereo outline, from the decided pose and from the truth: what a perfect outline would give (the stereo points
+  still weigh in); with it also ``erode1``: the polish against the stereo outline eroded by one pixel (3x3), and the
+  stereo outline's area over the rendered mask's (``area_ratio``) and their IoU per frame.
 
 Rows: per frame the truth's errors of each form, for the frames whose reported pose is valid and polished.
 ``--table`` prints mean / median e_t and e_R and the count within 0.10 m and 2 deg per form.
@@ -36,9 +41,10 @@ import json
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 
-FORMS = ("base", "seeds5", "dense", "long", "none", "truth", "multi1", "multi2")
+FORMS = ("base", "seeds5", "dense", "long", "none", "truth", "multi1", "multi2", "truemask", "truemask_truth", "erode1")
 MULTI = {"multi1": 1.0, "multi2": 2.0}   # start turns (deg) of the multi-start forms
 
 
@@ -49,7 +55,7 @@ def _chordal_mean(Rs: list[np.ndarray]) -> np.ndarray:
 
 
 def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: str | None = None,
-        quick: bool = False, multi: bool = False) -> None:
+        quick: bool = False, multi: bool = False, truemask: bool = False) -> None:
     from spacepose import estimator as est_mod
     from spacepose import silhouette as sil_mod
     from spacepose.bundle import load_bundle
@@ -106,6 +112,21 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
                             best = fit
                 forms[name] = None if best is None else (best.R, best.t)
                 forms[f"_{name}_deg"] = None if best is None else float(rotation_angle_deg(R, best.R))
+        if truemask:
+            from spacepose.image_vote import crop_to_frame
+            fr = decision.frame
+            obs = (crop_to_frame(truth["mask"], fr.x0, fr.y0, fr.side, fr.size,
+                                 convert=lambda box: (box > 127).astype(np.float32)) > 0.5).astype(np.uint8)
+            exact = dataclasses.replace(decision, observed=obs)
+            forms["truemask"] = capped(original(exact, R, t, points, config, **kw), R, t, config)
+            forms["truemask_truth"] = capped(original(exact, truth["R"], truth["t"], points, config, **kw),
+                                             truth["R"], truth["t"], config)
+            eroded = dataclasses.replace(decision, observed=cv2.erode(decision.observed, np.ones((3, 3), np.uint8),
+                                                                      borderType=cv2.BORDER_CONSTANT, borderValue=0))
+            forms["erode1"] = capped(original(eroded, R, t, points, config, **kw), R, t, config)
+            st = decision.observed > 0
+            forms["_mask"] = {"area_ratio": float(st.sum() / max(obs.sum(), 1)),
+                              "iou": float((st & (obs > 0)).sum() / max((st | (obs > 0)).sum(), 1))}
         from_truth = original(decision, truth["R"], truth["t"], points, config, **kw)
         forms["truth"] = capped(from_truth, truth["R"], truth["t"], config)
         forms["_chamfer"] = {k: (None if f is None else float(f.chamfer_px)) for k, f in
@@ -118,6 +139,8 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
     for i, rec in enumerate(records):
         calls.clear()
         truth.update(R=np.asarray(rec.R, dtype=np.float64), t=np.asarray(rec.t, dtype=np.float64))
+        if truemask:
+            truth["mask"] = read_image(root / "mask" / f"{rec.frame}.png")
         left = read_image(root / "left" / f"{rec.frame}.png")
         right = read_image(root / "right" / f"{rec.frame}.png")
         res = estimator.estimate(left, right)
@@ -127,6 +150,8 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
                 and np.allclose(calls[-1]["base"][1], res.t):
             row["polished"] = True
             row["chamfer"] = calls[-1]["_chamfer"]
+            if "_mask" in calls[-1]:
+                row["mask"] = calls[-1]["_mask"]
             for name in ("base", *MULTI):
                 if f"_{name}_deg" in calls[-1]:
                     row[f"{name}_deg"] = calls[-1][f"_{name}_deg"]
@@ -160,6 +185,11 @@ def table(paths: list[str]) -> None:
         if len(d):
             print(f"{name}: its turn from the decided pose: median {np.median(d):.2f} deg, over 2 deg on "
                   f"{int(np.sum(d > 2))}, over 3 deg on {int(np.sum(d > 3))} of {len(d)}")
+    m = np.array([(r["mask"]["area_ratio"], r["mask"]["iou"]) for r in rows if r.get("mask")])
+    if len(m):
+        print(f"stereo outline against the rendered mask: area ratio median {np.median(m[:, 0]):.3f} "
+              f"(p10 {np.percentile(m[:, 0], 10):.3f}, p90 {np.percentile(m[:, 0], 90):.3f}), IoU median "
+              f"{np.median(m[:, 1]):.3f}")
     ch = [(r["chamfer"]["base"], r["chamfer"]["truth"], r["base"][1], r["truth"][1]) for r in rows
           if r.get("chamfer") and None not in (r["chamfer"]["base"], r["chamfer"]["truth"])]
     if ch:
@@ -184,5 +214,6 @@ if __name__ == "__main__":
     ap.add_argument("--frames-from", default=None, help="rows of an earlier run: only its valid polished frames")
     ap.add_argument("--quick", action="store_true", help="only base, none and truth (and --multi)")
     ap.add_argument("--multi", action="store_true", help="the multi-start forms too")
+    ap.add_argument("--truemask", action="store_true", help="the polish against the rendered mask too")
     a = ap.parse_args()
-    run(a.dataset, a.split, a.skip, a.limit, a.out, a.frames_from, a.quick, a.multi)
+    run(a.dataset, a.split, a.skip, a.limit, a.out, a.frames_from, a.quick, a.multi, a.truemask)
