@@ -27,7 +27,10 @@ from the same inputs in these forms, with polish_pose's own caps (15 deg / 1 m f
   dataset's ``mask/``, resampled into the decision's silhouette frame as the stereo outline is) instead of the
   stereo outline, from the decided pose and from the truth: what a perfect outline would give (the stereo points
   still weigh in); with it also ``erode1``: the polish against the stereo outline eroded by one pixel (3x3), and the
-  stereo outline's area over the rendered mask's (``area_ratio``) and their IoU per frame.
+  stereo outline's area over the rendered mask's (``area_ratio``) and their IoU per frame; and ``lit``: the polish
+  against the stereo outline with its outer 2-pixel band cut where the left image is no brighter than the sky
+  around it (:func:`lit_outline`), with that outline's IoU against the rendered mask (``iou_lit``); ``lit5``: the
+  same with a 5-pixel band (``iou_lit5``).
 
 Rows: per frame the truth's errors of each form, for the frames whose reported pose is valid and polished.
 ``--table`` prints mean / median e_t and e_R and the count within 0.10 m and 2 deg per form.
@@ -44,7 +47,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-FORMS = ("base", "seeds5", "dense", "long", "none", "truth", "multi1", "multi2", "truemask", "truemask_truth", "erode1")
+FORMS = ("base", "seeds5", "dense", "long", "none", "truth", "multi1", "multi2", "truemask", "truemask_truth", "erode1", "lit", "lit5")
 MULTI = {"multi1": 1.0, "multi2": 2.0}   # start turns (deg) of the multi-start forms
 
 
@@ -52,6 +55,24 @@ def _chordal_mean(Rs: list[np.ndarray]) -> np.ndarray:
     U, _, Vt = np.linalg.svd(np.sum(Rs, axis=0))
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
     return U @ D @ Vt
+
+
+def lit_outline(stereo: np.ndarray, grey: np.ndarray, band_px: int = 2, margin: float = 0.02,
+                min_lit: float = 0.3) -> np.ndarray:
+    """(n, n) uint8: the stereo outline ``stereo`` with the pixels of its outer ``band_px`` band removed where the
+    left image's ``grey`` (n, n, [0, 1]) is within ``margin`` of the sky ring just outside it (95th percentile) and
+    no lit pixel is next to them; unchanged when under ``min_lit`` of the outline is lit (shadow, the Earth behind)."""
+    k = np.ones((3, 3), np.uint8)
+    st = stereo > 0
+    ring = (cv2.dilate(stereo, k, iterations=4) > 0) & ~(cv2.dilate(stereo, k, iterations=1) > 0)
+    if not ring.any() or not st.any():
+        return stereo
+    lit = grey > float(np.percentile(grey[ring], 95)) + margin
+    if (lit & st).sum() < min_lit * st.sum():
+        return stereo
+    band = st & ~(cv2.erode(stereo, k, iterations=band_px, borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0)
+    cut = band & ~(cv2.dilate(lit.astype(np.uint8), k) > 0)
+    return (st & ~cut).astype(np.uint8)
 
 
 def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: str | None = None,
@@ -113,7 +134,7 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
                 forms[name] = None if best is None else (best.R, best.t)
                 forms[f"_{name}_deg"] = None if best is None else float(rotation_angle_deg(R, best.R))
         if truemask:
-            from spacepose.image_vote import crop_to_frame
+            from spacepose.image_vote import crop_to_frame, window_grey
             fr = decision.frame
             obs = (crop_to_frame(truth["mask"], fr.x0, fr.y0, fr.side, fr.size,
                                  convert=lambda box: (box > 127).astype(np.float32)) > 0.5).astype(np.uint8)
@@ -125,8 +146,17 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
                                                                       borderType=cv2.BORDER_CONSTANT, borderValue=0))
             forms["erode1"] = capped(original(eroded, R, t, points, config, **kw), R, t, config)
             st = decision.observed > 0
-            forms["_mask"] = {"area_ratio": float(st.sum() / max(obs.sum(), 1)),
-                              "iou": float((st & (obs > 0)).sum() / max((st | (obs > 0)).sum(), 1))}
+            grey = window_grey(truth["left"], fr.x0, fr.y0, fr.side, fr.size)
+            lit = lit_outline(decision.observed, grey)
+            forms["lit"] = capped(original(dataclasses.replace(decision, observed=lit), R, t, points, config, **kw),
+                                  R, t, config)
+            lit5 = lit_outline(decision.observed, grey, band_px=5)
+            forms["lit5"] = capped(original(dataclasses.replace(decision, observed=lit5), R, t, points, config, **kw),
+                                   R, t, config)
+            forms["_mask"] = {"iou_lit5": float(((lit5 > 0) & (obs > 0)).sum() / max(((lit5 > 0) | (obs > 0)).sum(), 1)),
+                              "area_ratio": float(st.sum() / max(obs.sum(), 1)),
+                              "iou": float((st & (obs > 0)).sum() / max((st | (obs > 0)).sum(), 1)),
+                              "iou_lit": float(((lit > 0) & (obs > 0)).sum() / max(((lit > 0) | (obs > 0)).sum(), 1))}
         from_truth = original(decision, truth["R"], truth["t"], points, config, **kw)
         forms["truth"] = capped(from_truth, truth["R"], truth["t"], config)
         forms["_chamfer"] = {k: (None if f is None else float(f.chamfer_px)) for k, f in
@@ -143,6 +173,7 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
             truth["mask"] = read_image(root / "mask" / f"{rec.frame}.png")
         left = read_image(root / "left" / f"{rec.frame}.png")
         right = read_image(root / "right" / f"{rec.frame}.png")
+        truth["left"] = left
         res = estimator.estimate(left, right)
         row = {"frame": rec.frame, "regime": rec.regime, "distance": rec.distance_m, "valid": bool(res.valid),
                "decided_by": res.decided_by, "polished": False}
@@ -190,6 +221,12 @@ def table(paths: list[str]) -> None:
         print(f"stereo outline against the rendered mask: area ratio median {np.median(m[:, 0]):.3f} "
               f"(p10 {np.percentile(m[:, 0], 10):.3f}, p90 {np.percentile(m[:, 0], 90):.3f}), IoU median "
               f"{np.median(m[:, 1]):.3f}")
+    for key in ("iou_lit", "iou_lit5"):
+        lm = np.array([(r["mask"]["iou"], r["mask"][key]) for r in rows if r.get("mask") and key in r["mask"]])
+        if len(lm):
+            print(f"IoU against the rendered mask: stereo outline mean {lm[:, 0].mean():.3f}, {key[4:]} outline "
+                  f"{lm[:, 1].mean():.3f}; closer on {int(np.sum(lm[:, 1] > lm[:, 0]))} and farther on "
+                  f"{int(np.sum(lm[:, 1] < lm[:, 0]))} of {len(lm)} frames")
     ch = [(r["chamfer"]["base"], r["chamfer"]["truth"], r["base"][1], r["truth"][1]) for r in rows
           if r.get("chamfer") and None not in (r["chamfer"]["base"], r["chamfer"]["truth"])]
     if ch:
