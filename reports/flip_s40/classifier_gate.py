@@ -1,6 +1,7 @@
 """Session 40, step B of plan.txt: flip classifiers alone, decided the way the runtime decides since session 39.
 
     python reports/flip_s40/classifier_gate.py SAMPLES_PLAIN.npz SAMPLES_RESTYLED.npz -- BASE_CKPT CAND_CKPT
+    python reports/flip_s40/classifier_gate.py --decide P ...     # exploration only: another decide_prob for both
 
 The sample files are ``reports/tone_s38/classifier_val.py samples`` output (one view per frame of a dataset and of
 its restyled copy). A view is *decided* when p >= 0.995 on one side at the view and at the view's grey plane raised
@@ -22,7 +23,7 @@ from classifier_val import _model  # noqa: E402
 DECIDE, GAMMA, RATIO = 0.995, 2.0, 1.15
 
 
-def runtime_sides(net, views: np.ndarray) -> np.ndarray:
+def runtime_sides(net, views: np.ndarray, decide: float = DECIDE) -> np.ndarray:
     """+1 / -1 where the runtime's tone check decides pose A / pose B of each view, 0 where it does not."""
     import torch
 
@@ -34,24 +35,25 @@ def runtime_sides(net, views: np.ndarray) -> np.ndarray:
         return 1.0 / (1.0 + np.exp(-logit.astype(np.float64).reshape(-1)))
 
     ps = [prob(views), prob(toned_views(views, GAMMA)), prob(toned_views(views, 1.0 / GAMMA))]
-    a = np.all([p >= DECIDE for p in ps], axis=0)
-    b = np.all([p <= 1.0 - DECIDE for p in ps], axis=0)
+    a = np.all([p >= decide for p in ps], axis=0)
+    b = np.all([p <= 1.0 - decide for p in ps], axis=0)
     return np.where(a, 1, np.where(b, -1, 0))
 
 
-def main(sample_paths: list[str], ckpts: list[str]) -> int:
+def main(sample_paths: list[str], ckpts: list[str], decide: float = DECIDE) -> int:
     from spacepose.tools.flip_data import load_samples
 
     if len(sample_paths) != 2 or len(ckpts) != 2:
         raise SystemExit("give two sample files (as rendered, restyled) and two checkpoints (base, candidate)")
     counts = {}
+    print(f"decide_prob {decide}")
     print("| checkpoint | look | right-pose views | decided | of them wrong | neither-pairs decided |")
     print("|---|---|---|---|---|---|")
     for ckpt in ckpts:
         net = _model(ckpt)
         for look, path in zip(("as rendered", "restyled"), sample_paths):
             s = load_samples(path)
-            side = runtime_sides(net, s["views"])
+            side = runtime_sides(net, s["views"], decide)
             one = s["labels"] != 0.5
             truth = np.where(s["labels"] > 0.5, 1, -1)
             decided = one & (side != 0)
@@ -76,5 +78,8 @@ def main(sample_paths: list[str], ckpts: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    cut = sys.argv.index("--")
-    sys.exit(main(sys.argv[1:cut], sys.argv[cut + 1:]))
+    args = sys.argv[1:]
+    p = float(args[1]) if args[:1] == ["--decide"] else DECIDE
+    args = args[2:] if args[:1] == ["--decide"] else args
+    cut = args.index("--")
+    sys.exit(main(args[:cut], args[cut + 1:], p))
