@@ -32,6 +32,8 @@ from the same inputs in these forms, with polish_pose's own caps (15 deg / 1 m f
   around it (:func:`lit_outline`), with that outline's IoU against the rendered mask (``iou_lit``); ``lit5``: the
   same with a 5-pixel band (``iou_lit5``).
 
+``--quick`` leaves out ``seeds5``, ``dense`` and ``long``.
+
 Rows: per frame the truth's errors of each form, for the frames whose reported pose is valid and polished.
 ``--table`` prints mean / median e_t and e_R and the count within 0.10 m and 2 deg per form.
 """
@@ -47,7 +49,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-FORMS = ("base", "seeds5", "dense", "long", "none", "truth", "multi1", "multi2", "truemask", "truemask_truth", "erode1", "lit", "lit5")
+FORMS = ("base", "seeds5", "dense", "long", "none", "truth", "multi1", "multi2", "truemask", "truemask_truth", "erode1",
+         "lit", "lit5")
 MULTI = {"multi1": 1.0, "multi2": 2.0}   # start turns (deg) of the multi-start forms
 
 
