@@ -19,7 +19,9 @@ view under another tone curve (:func:`spacepose.flip_views.toned_views`, the pow
 run-time check ``flip_classifier.decide_tone_gamma`` refuses a decision that does not hold at the powers 2 and 1/2,
 and on session 38's fresh frames it refused many right ones; this teaches the classifier to be as sure under
 another tone as it is as rendered. Validation then also reports ``tone_kept``: of the samples with a right pose that it decides at
-``DECIDE`` (either way), the share it still decides, the same way, at the powers 2 and 1/2.
+``DECIDE`` (either way), the share it still decides, the same way, at the powers 2 and 1/2; and (session 40)
+``kept_wrong`` / ``kept_neither``, how many of the decisions that hold are wrong or made on a pair with neither pose
+right: session 40's run decided 1.7x the shipped classifier's views, and 2 of them wrong, which only a count shows.
 """
 
 from __future__ import annotations
@@ -127,7 +129,9 @@ def evaluate(model: Any, views: np.ndarray, labels: np.ndarray, regimes: np.ndar
     """Accuracy, and coverage / error at ``p >= 0.9`` either way, overall and per regime, over the samples
     with one right pose; over those with none (label 0.5), their number and the share with ``p >= 0.99``
     either way (``neither_sure``); and ``tone_kept`` (module docstring), with ``decided`` the share of the samples
-    with one right pose that it decides at ``DECIDE``."""
+    with one right pose that it decides at ``DECIDE``. ``kept_wrong`` and ``kept_neither`` count the decisions the
+    runtime would make (at ``DECIDE``, holding under the tone powers, ``decide_tone_gamma`` 2) that are wrong, and
+    that it makes on a pair with neither pose right: the flips a shipped classifier must not make."""
     from spacepose.flip_views import toned_views
 
     model.eval()
@@ -156,6 +160,9 @@ def evaluate(model: Any, views: np.ndarray, labels: np.ndarray, regimes: np.ndar
         decided = sure_side[sel] != 0
         out["decided"] = float(decided.mean()) if sel.any() else float("nan")
         out["tone_kept"] = float(holds[sel][decided].mean()) if decided.any() else float("nan")
+        out["kept_wrong"] = int((holds[sel] & ((sure_side[sel] > 0) != (labels[sel] > 0.5))).sum())
+        if none.any():
+            out["kept_neither"] = int(holds[none].sum())
         return out
 
     out = {"all": stats(np.ones(len(p), bool))}

@@ -138,6 +138,26 @@ def test_evaluate_reports_which_decisions_hold_under_other_tone_curves():
     assert out["a"]["tone_kept"] == 1.0 and out["b"]["tone_kept"] == 0.0
 
 
+def test_evaluate_counts_the_wrong_decisions_the_runtime_would_make():
+    """kept_wrong / kept_neither: decisions at 0.995 that hold at the tone powers 2 and 1/2 (what the runtime
+    reports) on the wrong pose, or on a pair where neither pose is right; a wrong decision that the tone check
+    refuses is not counted."""
+    from spacepose.tools.train_flip import evaluate
+
+    class Grey(torch.nn.Module):                      # logit = 20 (g - 0.5), as above
+        def forward(self, views):
+            return 20.0 * (views[:, 0, 0, 0] - 0.5)
+
+    views = np.zeros((6, 3, 4, 4), np.float32)
+    # 1.0 and 0.9 hold (pose A); 0.8 is decided but refused by the tone check; 0.5 undecided; 1.0 again, neither
+    views[:, 0] = np.array([1.0, 0.9, 0.8, 0.5, 0.1, 1.0], np.float32)[:, None, None]
+    labels = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.5], np.float32)   # 0.9 and 0.8 decide A where B is right
+    out = evaluate(Grey(), views, labels, np.array(["a"] * 6))
+    assert out["all"]["kept_wrong"] == 1 and out["all"]["kept_neither"] == 1
+    right = evaluate(Grey(), views[:5], np.array([1.0, 1.0, 1.0, 0.0, 0.0], np.float32), np.array(["a"] * 5))
+    assert right["all"]["kept_wrong"] == 0 and "kept_neither" not in right["all"]
+
+
 def test_the_tone_loss_asks_the_toned_logit_to_be_as_sure_on_the_same_side():
     from spacepose.tools.train_flip import TONE_CLIP, tone_loss
 
