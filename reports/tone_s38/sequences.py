@@ -46,11 +46,20 @@ def commands(what: str, modes: list[str], plain: list[tuple[str, int, int, str, 
     return out
 
 
-def main(argv: list[str]) -> int:
+def check_main(argv: list[str], set_name: str, first_seed: int, prefix: str, restyle_seed: int, session: str) -> int:
+    """Print :func:`commands` (``argv``: ``render``, or ``eval MODE...``) for a check set of 12 sequences on
+    session 30's grids: ``prefix``00.. (seeds from ``first_seed``; registered in session 30's sets as ``set_name``)
+    and their restyled copies ``prefix``r00.. (restyle seeds from ``restyle_seed``); reports to ``runs/<session>/``.
+    Sessions 39 and 40 call it for their own sets."""
+    s30.SETS.setdefault(set_name, (first_seed, 12, prefix))
     what, modes = (argv[0] if argv else "render"), argv[1:] or ["base"]
-    print("\n".join(commands(what, modes, sequences(), prefixes=("seq_z", "seq_zr"),
-                             restyle_seed=RESTYLE_SEED, session="s38")))
+    print("\n".join(commands(what, modes, s30.sequences(set_name), prefixes=(prefix, prefix + "r"),
+                             restyle_seed=restyle_seed, session=session)))
     return 0
+
+
+def main(argv: list[str]) -> int:
+    return check_main(argv, "check_s38", 3811, "seq_z", RESTYLE_SEED, "s38")
 
 
 if __name__ == "__main__":

@@ -18,21 +18,6 @@ _spec = importlib.util.spec_from_file_location("tone_s38_sequences",
 _s38 = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_s38)          # session 38's commands, and session 30's grids through it
 
-_s38.s30.SETS.setdefault("check_s39", (3921, 12, "seq_y"))
-RESTYLE_SEED = 3941
-
-
-def sequences() -> list[tuple[str, int, int, str, int]]:
-    """(name, seed, distance, regime, rate) of every plain sequence."""
-    return _s38.s30.sequences("check_s39")
-
-
-def main(argv: list[str]) -> int:
-    what, modes = (argv[0] if argv else "render"), argv[1:] or ["base"]
-    print("\n".join(_s38.commands(what, modes, sequences(), prefixes=("seq_y", "seq_yr"),
-                                  restyle_seed=RESTYLE_SEED, session="s39")))
-    return 0
-
 
 if __name__ == "__main__":
-    raise SystemExit(main(sys.argv[1:]))
+    raise SystemExit(_s38.check_main(sys.argv[1:], "check_s39", 3921, "seq_y", 3941, "s39"))
