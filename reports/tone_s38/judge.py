@@ -95,13 +95,13 @@ def table(data: dict, title: str) -> None:
                   f"{sum(bool(r['valid'] and r.get('tracked')) for r in v)} |")
 
 
-def _rule1_rest(data: dict, clauses: dict, pooled, valid) -> None:
+def _rule1_rest(data: dict, clauses: dict, valid) -> None:
     """rule.txt's V3 (the refused poses are the wrong ones) and V4 (the cost)."""
     refused = [(n, k, by["base"][k]) for n, by in data.items() for k, r in by["cand"].items()
                if by["base"][k]["valid"] and not r["valid"]]
     d_wrong = sum(_wrong(r) for _, _, r in refused)
     all_names = tuple(data)
-    base_valid, base_wrong = pooled(all_names, "base", valid), pooled(all_names, "base", _wrong)
+    base_valid, base_wrong = pooled(data, all_names, "base", valid), pooled(data, all_names, "base", _wrong)
     share_d = d_wrong / max(len(refused), 1)
     share_b = base_wrong / max(base_valid, 1)
     print(f"V3: D = {len(refused)} poses base reports and cand refuses, {d_wrong} of them wrong "
@@ -112,8 +112,8 @@ def _rule1_rest(data: dict, clauses: dict, pooled, valid) -> None:
     clauses["V3 the refused are the wrong"] = d_wrong >= 1 and share_d >= 2.0 * share_b
     v4 = []
     for names in (("F", "R"), ("S", "SR")):
-        v = {b: pooled(names, b, valid) for b in BUNDLES}
-        w = {b: pooled(names, b, _within) for b in BUNDLES}
+        v = {b: pooled(data, names, b, valid) for b in BUNDLES}
+        w = {b: pooled(data, names, b, _within) for b in BUNDLES}
         print(f"V4 {'+'.join(names)}: valid cand {v['cand']} vs base {v['base']} "
               f"({v['cand'] / max(v['base'], 1):.3f}); within cand {w['cand']} vs base {w['base']} "
               f"({w['cand'] / max(w['base'], 1):.3f})")
@@ -121,41 +121,60 @@ def _rule1_rest(data: dict, clauses: dict, pooled, valid) -> None:
     clauses["V4 the cost"] = all(v4)
 
 
+def pooled(data: dict, names: tuple[str, ...], b: str, test) -> int:
+    """How many of bundle ``b``'s rows in the sets ``names`` of ``data`` (:func:`sets`) pass ``test``."""
+    return sum(test(r) for n in names for r in data[n][b].values())
+
+
+def clause_no_new_far(data: dict, clauses: dict, tag: str = "V1") -> None:
+    """``tag``: no valid cand pose is far unless base's pose of the same frame is far too (printed, into
+    ``clauses``). Sessions 38-40's rules share it."""
+    new_far = [(n, k) for n, by in data.items() for k, r in by["cand"].items() if _far(r) and not _far(by["base"][k])]
+    clauses[f"{tag} no new far pose"] = not new_far
+    print(f"{tag}: cand's far poses that base does not report:", new_far)
+
+
+def clause_no_more_wrong(data: dict, clauses: dict, tag: str = "V2") -> None:
+    """``tag``: F+R pooled and S+SR pooled, cand's wrong poses at most base's (printed, into ``clauses``)."""
+    ok = []
+    for names in (("F", "R"), ("S", "SR")):
+        w = {b: pooled(data, names, b, _wrong) for b in BUNDLES}
+        print(f"{tag} {'+'.join(names)}: wrong cand {w['cand']} vs base {w['base']}")
+        ok.append(w["cand"] <= w["base"])
+    clauses[f"{tag} no more wrong"] = all(ok)
+
+
+def print_verdict(clauses: dict, met: str) -> bool:
+    """Print every clause and the verdict (``met`` when all hold); returns whether all hold."""
+    for name, ok in clauses.items():
+        print(f"{name}: {'holds' if ok else 'FAILS'}")
+    all_hold = all(clauses.values())
+    print("verdict:", met if all_hold else "NOT MET: nothing of it ships")
+    return all_hold
+
+
 def judge(cand: str = "cand") -> int:
     """rule.txt's clauses (``cand``) or rule2.txt's (``cand2``); prints them and the verdict."""
     data = sets(cand)
     table(data, f"base: the shipped bundle; cand: {cand}")
 
-    def pooled(names: tuple[str, ...], b: str, test) -> int:
-        return sum(test(r) for n in names for r in data[n][b].values())
-
     valid = lambda r: bool(r["valid"])  # noqa: E731
     clauses = {}
-    new_far = [(n, k) for n, by in data.items() for k, r in by["cand"].items() if _far(r) and not _far(by["base"][k])]
-    clauses["V1 no new far pose"] = not new_far
-    print("V1: cand's far poses that base does not report:", new_far)
-    v2 = []
-    for names in (("F", "R"), ("S", "SR")):
-        w = {b: pooled(names, b, _wrong) for b in BUNDLES}
-        print(f"V2 {'+'.join(names)}: wrong cand {w['cand']} vs base {w['base']}")
-        v2.append(w["cand"] <= w["base"])
-    clauses["V2 no more wrong"] = all(v2)
+    clause_no_new_far(data, clauses)
+    clause_no_more_wrong(data, clauses)
     if cand == "cand":
-        _rule1_rest(data, clauses, pooled, valid)
+        _rule1_rest(data, clauses, valid)
     else:
-        v = {b: pooled(("F", "R"), b, valid) for b in BUNDLES}
-        w = {b: pooled(("F", "R"), b, _within) for b in BUNDLES}
-        ws = {b: pooled(("S", "SR"), b, _within) for b in BUNDLES}
+        v = {b: pooled(data, ("F", "R"), b, valid) for b in BUNDLES}
+        w = {b: pooled(data, ("F", "R"), b, _within) for b in BUNDLES}
+        ws = {b: pooled(data, ("S", "SR"), b, _within) for b in BUNDLES}
         print(f"V3 F+R: valid cand2 {v['cand']} vs base {v['base']} ({v['cand'] / max(v['base'], 1):.3f}); within "
               f"cand2 {w['cand']} vs base {w['base']} ({w['cand'] / max(w['base'], 1):.3f})")
         print(f"V4 S+SR: within cand2 {ws['cand']} vs base {ws['base']} ({ws['cand'] / max(ws['base'], 1):.3f})")
         clauses["V3 more poses"] = v["cand"] >= 1.02 * v["base"] and w["cand"] >= 1.02 * w["base"]
         clauses["V4 sequences keep theirs"] = ws["cand"] >= 0.98 * ws["base"]
-    for name, ok in clauses.items():
-        print(f"{name}: {'holds' if ok else 'FAILS'}")
-    met = all(clauses.values())
-    print("verdict:", ("MET: " + ("decide_tone_gamma 2.0" if cand == "cand" else "the two image gates") + " may ship")
-          if met else "NOT MET: nothing of it ships")
+    print_verdict(clauses, "MET: " + ("decide_tone_gamma 2.0" if cand == "cand" else "the two image gates")
+                  + " may ship")
     return 0
 
 

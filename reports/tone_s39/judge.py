@@ -30,7 +30,7 @@ def _round1_judge():
 
 
 _s38 = _round1_judge()
-BUNDLES, _wrong, _within, _far, table = _s38.BUNDLES, _s38._wrong, _s38._within, _s38._far, _s38.table
+BUNDLES, _wrong, _within, table = _s38.BUNDLES, _s38._wrong, _s38._within, _s38.table
 
 
 def collect(runs: Path) -> None:
@@ -52,19 +52,10 @@ def judge() -> int:
     table(data, "round 2 (this session's fresh sets); base: the shipped bundle; cand: decide_tone_gamma 2.0")
     table(round1, "round 1 (session 38's sets; its base had the image gates of before rule 2)")
 
-    def pooled(d: dict, names: tuple[str, ...], b: str, test) -> int:
-        return sum(test(r) for n in names for r in d[n][b].values())
-
+    pooled = _s38.pooled
     clauses = {}
-    new_far = [(n, k) for n, by in data.items() for k, r in by["cand"].items() if _far(r) and not _far(by["base"][k])]
-    clauses["V1 no new far pose"] = not new_far
-    print("V1: cand's far poses that base does not report:", new_far)
-    v2 = []
-    for names in (("F", "R"), ("S", "SR")):
-        w = {b: pooled(data, names, b, _wrong) for b in BUNDLES}
-        print(f"V2 {'+'.join(names)}: wrong cand {w['cand']} vs base {w['base']}")
-        v2.append(w["cand"] <= w["base"])
-    clauses["V2 no more wrong"] = all(v2)
+    _s38.clause_no_new_far(data, clauses)
+    _s38.clause_no_more_wrong(data, clauses)
     refused = [(rnd, n, k, by["base"][k]) for rnd, d in (("round 2", data), ("round 1", round1)) for n, by in d.items()
                for k, r in by["cand"].items() if by["base"][k]["valid"] and not r["valid"]]
     d_wrong = sum(_wrong(r) for *_, r in refused)
@@ -87,10 +78,7 @@ def judge() -> int:
               f"bar {bar_v}); within cand {w['cand']} vs base {w['base']} ({w['cand'] / max(w['base'], 1):.3f}, bar {bar_w})")
         v4.append(v["cand"] >= bar_v * v["base"] and w["cand"] >= bar_w * w["base"])
     clauses["V4 the cost"] = all(v4)
-    for name, ok in clauses.items():
-        print(f"{name}: {'holds' if ok else 'FAILS'}")
-    met = all(clauses.values())
-    print("verdict:", "MET: decide_tone_gamma 2.0 ships" if met else "NOT MET: nothing of it ships")
+    _s38.print_verdict(clauses, "MET: decide_tone_gamma 2.0 ships")
     return 0
 
 
