@@ -116,12 +116,28 @@ def tone_loss(logit: Any, toned_logit: Any) -> Any:
     return (torch.relu(size - side * toned_logit) ** 2).mean()
 
 
-def _logits(model: Any, views: np.ndarray, batch: int) -> np.ndarray:
+def batched_logits(model: Any, views: np.ndarray, batch: int = 128) -> np.ndarray:
+    """(N,) the model's logits of (N, 3, S, S) ``views``, ``batch`` at a time, without gradients."""
     import torch
 
     with torch.no_grad():
         return np.concatenate([model(torch.from_numpy(views[i:i + batch])).numpy()
                                for i in range(0, len(views), batch)])
+
+
+def held_decisions(logit: np.ndarray, toned: list[np.ndarray], decide: float = DECIDE
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(p, side, holds)`` of (N,) logits and their logits at the tone powers (``toned``, one (N,) array per
+    power): p the probability (in the logits' dtype), side +1 / -1 where p >= ``decide`` for pose A / B, else 0,
+    and holds where a side is decided and every toned probability reaches ``decide`` on the same side: the
+    decisions the runtime makes with ``flip_classifier.decide_tone_gamma``."""
+    p = 1.0 / (1.0 + np.exp(-logit))
+    side = np.where(p >= decide, 1, np.where(p <= 1.0 - decide, -1, 0))
+    holds = side != 0
+    for t in toned:
+        q = 1.0 / (1.0 + np.exp(-t))
+        holds &= np.where(side > 0, q >= decide, q <= 1.0 - decide)
+    return p, side, holds
 
 
 def evaluate(model: Any, views: np.ndarray, labels: np.ndarray, regimes: np.ndarray, batch: int = 128
@@ -135,15 +151,10 @@ def evaluate(model: Any, views: np.ndarray, labels: np.ndarray, regimes: np.ndar
     from spacepose.flip_views import toned_views
 
     model.eval()
-    logit = _logits(model, views, batch)
-    toned = [_logits(model, toned_views(views, power), batch) for power in TONE_POWERS]
+    logit = batched_logits(model, views, batch)
+    toned = [batched_logits(model, toned_views(views, power), batch) for power in TONE_POWERS]
     model.train()
-    p = 1.0 / (1.0 + np.exp(-logit))
-    sure_side = np.where(p >= DECIDE, 1, np.where(p <= 1.0 - DECIDE, -1, 0))
-    holds = sure_side != 0
-    for t in toned:
-        q = 1.0 / (1.0 + np.exp(-t))
-        holds &= np.where(sure_side > 0, q >= DECIDE, q <= 1.0 - DECIDE)
+    p, sure_side, holds = held_decisions(logit, toned)
 
     neither = labels == 0.5
 

@@ -20,24 +20,20 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tone_s38"))
 from classifier_val import _model  # noqa: E402
 
-DECIDE, GAMMA, RATIO = 0.995, 2.0, 1.15
+DECIDE, RATIO = 0.995, 1.15
 
 
 def runtime_sides(net, views: np.ndarray, decide: float = DECIDE) -> np.ndarray:
-    """+1 / -1 where the runtime's tone check decides pose A / pose B of each view, 0 where it does not."""
-    import torch
-
+    """+1 / -1 where the runtime's tone check decides pose A / pose B of each view, 0 where it does not
+    (:func:`spacepose.tools.train_flip.held_decisions` on float64 logits)."""
     from spacepose.flip_views import toned_views
+    from spacepose.tools.train_flip import TONE_POWERS, batched_logits, held_decisions
 
-    def prob(v: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            logit = torch.cat([net(torch.from_numpy(v[i:i + 128])) for i in range(0, len(v), 128)]).numpy()
-        return 1.0 / (1.0 + np.exp(-logit.astype(np.float64).reshape(-1)))
+    def logits(v: np.ndarray) -> np.ndarray:
+        return batched_logits(net, v).astype(np.float64).reshape(-1)
 
-    ps = [prob(views), prob(toned_views(views, GAMMA)), prob(toned_views(views, 1.0 / GAMMA))]
-    a = np.all([p >= decide for p in ps], axis=0)
-    b = np.all([p <= 1.0 - decide for p in ps], axis=0)
-    return np.where(a, 1, np.where(b, -1, 0))
+    _, side, holds = held_decisions(logits(views), [logits(toned_views(views, g)) for g in TONE_POWERS], decide)
+    return np.where(holds, side, 0)
 
 
 def main(sample_paths: list[str], ckpts: list[str], decide: float = DECIDE) -> int:
