@@ -60,6 +60,12 @@ def _chordal_mean(Rs: list[np.ndarray]) -> np.ndarray:
     return U @ D @ Vt
 
 
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two (n, n) masks (nonzero: inside)."""
+    a, b = a > 0, b > 0
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
 def lit_outline(stereo: np.ndarray, grey: np.ndarray, band_px: int = 2, margin: float = 0.02,
                 min_lit: float = 0.3) -> np.ndarray:
     """(n, n) uint8: the stereo outline ``stereo`` with the pixels of its outer ``band_px`` band removed where the
@@ -100,27 +106,27 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
     calls: list[dict] = []
     original = sil_mod.polish_pose
 
-    def capped(fit, R, t, config):
-        if fit is None or not (np.all(np.isfinite(fit.R)) and np.all(np.isfinite(fit.t))):
-            return None
-        if (float(rotation_angle_deg(R, fit.R)) > config.polish_max_deg
-                or float(np.linalg.norm(fit.t - np.asarray(t))) > config.polish_max_m):
-            return None
-        return fit.R, fit.t
+    def within_caps(fit, R, t, config) -> bool:
+        """polish_pose's own caps, measured from (R, t) instead of the start the polish was given."""
+        return (float(rotation_angle_deg(R, fit.R)) <= config.polish_max_deg
+                and float(np.linalg.norm(fit.t - np.asarray(t))) <= config.polish_max_m)
 
     def wrapped(decision, R, t, points, config, **kw):
+        def polish(dec, R0, t0, cfg=config):
+            """(R, t) of polish_pose from (R0, t0), None where it refuses (not finite, or past its caps from there)."""
+            fit = original(dec, R0, t0, points, cfg, **kw)
+            return None if fit is None else (fit.R, fit.t)
+
         shipped = original(decision, R, t, points, config, **kw)
         forms = {"base": None if shipped is None else (shipped.R, shipped.t), "none": (np.asarray(R), np.asarray(t))}
         if not quick:
-            fits = [capped(original(decision, R, t, points, dataclasses.replace(config, seed=s), **kw), R, t, config)
-                    for s in range(5)]
-            ok = [f for f in fits if f is not None]
+            ok = [f for f in (polish(decision, R, t, dataclasses.replace(config, seed=s)) for s in range(5))
+                  if f is not None]
             forms["seeds5"] = ((_chordal_mean([f[0] for f in ok]), np.mean([f[1] for f in ok], axis=0)) if ok
                                else None)
-            forms["dense"] = capped(original(decision, R, t, points, dataclasses.replace(
-                config, contour_points=1_000_000, stereo_points=3000), **kw), R, t, config)
-            forms["long"] = capped(original(decision, R, t, points, dataclasses.replace(config, iterations=16), **kw),
-                                   R, t, config)
+            forms["dense"] = polish(decision, R, t, dataclasses.replace(config, contour_points=1_000_000,
+                                                                        stereo_points=3000))
+            forms["long"] = polish(decision, R, t, dataclasses.replace(config, iterations=16))
         forms["_base_deg"] = None if forms["base"] is None else float(rotation_angle_deg(R, forms["base"][0]))
         if multi:
             from spacepose.registration import exp_so3
@@ -132,7 +138,8 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
                         w[axis] = sign * np.radians(deg)
                         dR = exp_so3(w)
                         fit = original(decision, dR @ R, dR @ np.asarray(t), points, config, **kw)
-                        if capped(fit, R, t, config) is not None and (best is None or fit.chamfer_px < best.chamfer_px):
+                        if (fit is not None and within_caps(fit, R, t, config)
+                                and (best is None or fit.chamfer_px < best.chamfer_px)):
                             best = fit
                 forms[name] = None if best is None else (best.R, best.t)
                 forms[f"_{name}_deg"] = None if best is None else float(rotation_angle_deg(R, best.R))
@@ -142,26 +149,21 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
             obs = (crop_to_frame(truth["mask"], fr.x0, fr.y0, fr.side, fr.size,
                                  convert=lambda box: (box > 127).astype(np.float32)) > 0.5).astype(np.uint8)
             exact = dataclasses.replace(decision, observed=obs)
-            forms["truemask"] = capped(original(exact, R, t, points, config, **kw), R, t, config)
-            forms["truemask_truth"] = capped(original(exact, truth["R"], truth["t"], points, config, **kw),
-                                             truth["R"], truth["t"], config)
-            eroded = dataclasses.replace(decision, observed=cv2.erode(decision.observed, np.ones((3, 3), np.uint8),
-                                                                      borderType=cv2.BORDER_CONSTANT, borderValue=0))
-            forms["erode1"] = capped(original(eroded, R, t, points, config, **kw), R, t, config)
-            st = decision.observed > 0
+            forms["truemask"] = polish(exact, R, t)
+            forms["truemask_truth"] = polish(exact, truth["R"], truth["t"])
+            eroded = cv2.erode(decision.observed, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT,
+                               borderValue=0)
+            forms["erode1"] = polish(dataclasses.replace(decision, observed=eroded), R, t)
             grey = window_grey(truth["left"], fr.x0, fr.y0, fr.side, fr.size)
             lit = lit_outline(decision.observed, grey)
-            forms["lit"] = capped(original(dataclasses.replace(decision, observed=lit), R, t, points, config, **kw),
-                                  R, t, config)
+            forms["lit"] = polish(dataclasses.replace(decision, observed=lit), R, t)
             lit5 = lit_outline(decision.observed, grey, band_px=5)
-            forms["lit5"] = capped(original(dataclasses.replace(decision, observed=lit5), R, t, points, config, **kw),
-                                   R, t, config)
-            forms["_mask"] = {"iou_lit5": float(((lit5 > 0) & (obs > 0)).sum() / max(((lit5 > 0) | (obs > 0)).sum(), 1)),
-                              "area_ratio": float(st.sum() / max(obs.sum(), 1)),
-                              "iou": float((st & (obs > 0)).sum() / max((st | (obs > 0)).sum(), 1)),
-                              "iou_lit": float(((lit > 0) & (obs > 0)).sum() / max(((lit > 0) | (obs > 0)).sum(), 1))}
+            forms["lit5"] = polish(dataclasses.replace(decision, observed=lit5), R, t)
+            forms["_mask"] = {"iou_lit5": _iou(lit5, obs), "area_ratio": float((decision.observed > 0).sum()
+                                                                               / max((obs > 0).sum(), 1)),
+                              "iou": _iou(decision.observed, obs), "iou_lit": _iou(lit, obs)}
         from_truth = original(decision, truth["R"], truth["t"], points, config, **kw)
-        forms["truth"] = capped(from_truth, truth["R"], truth["t"], config)
+        forms["truth"] = None if from_truth is None else (from_truth.R, from_truth.t)
         forms["_chamfer"] = {k: (None if f is None else float(f.chamfer_px)) for k, f in
                              (("base", shipped), ("truth", from_truth))}
         calls.append(forms)
