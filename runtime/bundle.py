@@ -773,8 +773,6 @@ def load_bundle(path: str | os.PathLike | None = None, verify_graphs: bool = Tru
     files = [("stereo", bundle.stereo_path), ("pose", bundle.pose_path)]
     if bundle.flip_classifier is not None:
         files.append(("flip", folder / bundle.flip_classifier.file))
-        if bundle.flip_classifier.second_file:
-            files.append(("flip", folder / bundle.flip_classifier.second_file))
     for kind, file in files:
         if not file.is_file():
             raise BundleError(f"model bundle {folder} is missing {file.name}")

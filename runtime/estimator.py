@@ -172,9 +172,6 @@ class PoseResult:
         flip_prob: with the bundle's ``flip_classifier``, the probability the classifier gives the outline
             stage's winner against its 180° flip (:mod:`spacepose.flip_classifier`); NaN when it did not
             run. Not part of the JSON line.
-        flip_second_prob: the probability the bundle's second flip graph (``flip_classifier.second_file``) gives
-            the pose it decided, on a frame the first graph left open; NaN on every other frame. Not part of the
-            JSON line.
         decided: ``(R, t)`` before the polish, when it moved the pose (the next frame's tracking
             compares with it: the tracking gates were set on unpolished poses); ``None`` otherwise.
         decided_by: for a valid pose, what picked it from its flip (:data:`DECISION_ROUTES`):
@@ -206,7 +203,6 @@ class PoseResult:
     polish_deg: float = float("nan")
     polish_m: float = float("nan")
     flip_prob: float = float("nan")
-    flip_second_prob: float = float("nan")
     decided: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     decided_by: str = ""
     position: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
@@ -319,12 +315,6 @@ def refine_icp(R: np.ndarray, t: np.ndarray, scene: np.ndarray, model: np.ndarra
         if angle < 1e-6 and np.linalg.norm(tau) < 1e-6:
             break
     return R, t
-
-
-def _holds(p: np.ndarray, winner: bool, prob: float) -> bool:
-    """Whether the flip classifier's probabilities ``p`` (any shape; given to the outline's winner) all reach ``prob``
-    for the ``winner``, else all stay at most ``1 - prob`` (for its flip); true of an empty ``p``."""
-    return bool(np.all(p >= prob) if winner else np.all(p <= 1.0 - prob))
 
 
 def _stage_invalid(stage: PoseStageResult, status: str, factors: dict[str, float] | None = None) -> PoseStageResult:
@@ -562,8 +552,7 @@ class PoseEstimator:
                             outline_image_background=factor("outline_image_background"),
                             outline_image_pixels=factor("outline_image_pixels"),
                             polish_deg=factor("polish_deg"), polish_m=factor("polish_m"),
-                            flip_prob=factor("flip_prob"), flip_second_prob=factor("flip_second_prob"),
-                            decided=stage.decided if valid else None,
+                            flip_prob=factor("flip_prob"), decided=stage.decided if valid else None,
                             decided_by=_route_name(factors) if valid else "",
                             position=position, position_valid=position_valid)
         if valid and self.bundle.uncertainty is not None:
@@ -754,7 +743,7 @@ class PoseEstimator:
                 return _stage_invalid(stage, "weak_votes", factors), (
                     f"the outline fits loosely ({outline.best.chamfer_px:.2f} px > {sil.max_chamfer_px:g} px) and the "
                     f"flip classifier gives the pose only {flip_p:.3f} (< {fc.loose_fit_min_prob:g})")
-        learned = self._learned_choice(outline, flip_p, reg.tau_m, flip_input, timer, factors)
+        learned = self._learned_choice(outline, flip_p, reg.tau_m, flip_input, timer)
         if outline is not None and outline.decided(sil):
             if conclusive and float(rotation_angle_deg(reg.R, outline.best.R)) > 90.0:
                 return _stage_invalid(stage, "weak_votes", factors), (
@@ -808,7 +797,7 @@ class PoseEstimator:
             track = self._track(reg, prior, outline, margin) if prior is not None else ""
             if isinstance(track, str):
                 return _stage_invalid(stage, "weak_votes", factors), refusal + (f"; {track}" if track else "")
-            for key in ("flip_decided", "flip_second_prob", "polish_deg", "polish_m"):
+            for key in ("flip_decided", "polish_deg", "polish_m"):
                 factors.pop(key, None)
             (R, t), fallback = track
             confidence = 0.5 * reg.inlier_fraction
@@ -961,57 +950,23 @@ class PoseEstimator:
             timer.add_network((time.perf_counter() - t_net) * 1e3)
         return p, views
 
-    def _toned_probabilities(self, views: np.ndarray | None, timer: StageTimer) -> np.ndarray | None:
-        """(2,) probabilities the first graph gives the winner with the views' grey plane under the tone curves of
-        ``decide_tone_gamma``; (0,) when that is 1 (no such check), ``None`` without views; times ``flip_net``
-        (network time)."""
+    def _decided_under_tones(self, views: np.ndarray | None, winner: bool, timer: StageTimer) -> bool:
+        """Whether the classifier still gives the ``winner`` (else its flip) at least ``decide_prob`` with the
+        views' grey plane under the tone curves of ``decide_tone_gamma`` (always, when that is 1); times
+        ``flip_net`` (network time)."""
         fc = self.bundle.flip_classifier
         if fc.decide_tone_gamma == 1.0:
-            return np.zeros(0)
+            return True
         if views is None:
-            return None
+            return False
         with timer.stage("flip_net"):
             t_net = time.perf_counter()
             p = self._flip_classifier.toned_probabilities(views, fc.decide_tone_gamma)
             timer.add_network((time.perf_counter() - t_net) * 1e3)
-        return p
-
-    def _second_decides(self, views: np.ndarray | None, winner: bool, timer: StageTimer) -> float | None:
-        """The second graph's probability for the ``winner`` (else its flip) at the view, when it gives that side
-        at least ``decide_prob`` at the view and under the tone curves of ``decide_tone_gamma``; ``None`` when it
-        does not or there are no views; times ``flip_net`` (network time)."""
-        fc = self.bundle.flip_classifier
-        if views is None:
-            return None
-        with timer.stage("flip_net"):
-            t_net = time.perf_counter()
-            p = self._flip_classifier.second_probabilities(views, fc.decide_tone_gamma)
-            timer.add_network((time.perf_counter() - t_net) * 1e3)
-        return float(p[0]) if _holds(p, winner, fc.decide_prob) else None
-
-    def _side_pose(self, outline: Any, winner: bool) -> tuple[np.ndarray, np.ndarray] | None:
-        """The pose of the outline's ``winner`` (else of its rival, which must be the winner's flip within 20°), when
-        it fits the outline within the classifier's ``max_chamfer_px`` and a usable image vote does not back the
-        other side; ``None`` otherwise."""
-        fc, sil = self.bundle.flip_classifier, self.bundle.silhouette
-        vote = outline.vote if sil.image_vote and outline.vote is not None and outline.vote.usable else None
-        best, other = outline.best, outline.other
-        if winner:
-            if best.chamfer_px > fc.max_chamfer_px or (vote is not None and vote.score <= sil.image_veto_score):
-                return None
-            return best.R, best.t
-        if not (other.chamfer_px <= fc.max_chamfer_px and np.all(np.isfinite(other.R))):
-            return None
-        flip_R, _ = flipped_pose(best.R, best.t, self.bundle.centre, fc.axis)
-        if float(rotation_angle_deg(flip_R, other.R)) > 20.0:
-            return None
-        if vote is not None and vote.score >= -sil.image_veto_score:
-            return None
-        return other.R, other.t
+        return bool(np.all(p >= fc.decide_prob) if winner else np.all(p <= 1.0 - fc.decide_prob))
 
     def _learned_choice(self, outline: Any, flip_p: float | None, tau_m: float, views: np.ndarray | None,
-                        timer: StageTimer, factors: dict[str, float] | None = None
-                        ) -> tuple[np.ndarray, np.ndarray] | None:
+                        timer: StageTimer) -> tuple[np.ndarray, np.ndarray] | None:
         """The pose the flip classifier decides on a frame (``None`` when it does not): the outline's
         winner when it gives it at least ``decide_prob``, the outline's rival when it gives the winner
         at most ``1 - decide_prob`` and that rival is the winner's flip (within 20°, refined); either
@@ -1019,10 +974,7 @@ class PoseEstimator:
         ``min_margin_px``, the outlines differ in enough pixels, a usable image vote does not
         back the other one, the registration's depth tolerance ``tau_m`` is at most
         ``max_depth_tolerance_m`` (when set; NaN refuses) and the decision holds under other tone curves of
-        the ``views`` (``decide_tone_gamma``). Where the first graph does not decide, a ``second_file`` graph may,
-        under the same gates, for the side the first gives at least ``second_agree_prob`` at the view and under
-        the tone curves (:class:`spacepose.flip_classifier.FlipClassifierConfig`); its probability then goes into
-        ``factors["flip_second_prob"]``."""
+        the ``views`` (``decide_tone_gamma``)."""
         if flip_p is None:
             return None
         fc, sil = self.bundle.flip_classifier, self.bundle.silhouette
@@ -1030,25 +982,19 @@ class PoseEstimator:
             return None
         if outline.too_few_flip_pixels(sil) or outline.margin_px < fc.min_margin_px:
             return None
-        winner = flip_p >= 0.5
-        first = _holds(np.array([flip_p]), winner, fc.decide_prob)
-        second = self._flip_classifier.second is not None and _holds(np.array([flip_p]), winner, fc.second_agree_prob)
-        if not (first or second):
-            return None
-        pose = self._side_pose(outline, winner)
-        if pose is None:
-            return None
-        toned = self._toned_probabilities(views, timer)
-        if toned is None:
-            return None
-        if first and _holds(toned, winner, fc.decide_prob):
-            return pose
-        if second and _holds(toned, winner, fc.second_agree_prob):
-            p2 = self._second_decides(views, winner, timer)
-            if p2 is not None:
-                if factors is not None:
-                    factors["flip_second_prob"] = p2
-                return pose
+        vote = outline.vote if sil.image_vote and outline.vote is not None and outline.vote.usable else None
+        best, other = outline.best, outline.other
+        if flip_p >= fc.decide_prob and best.chamfer_px <= fc.max_chamfer_px:
+            if vote is not None and vote.score <= sil.image_veto_score:
+                return None
+            return (best.R, best.t) if self._decided_under_tones(views, True, timer) else None
+        if flip_p <= 1.0 - fc.decide_prob and other.chamfer_px <= fc.max_chamfer_px and np.all(np.isfinite(other.R)):
+            flip_R, _ = flipped_pose(best.R, best.t, self.bundle.centre, fc.axis)
+            if float(rotation_angle_deg(flip_R, other.R)) > 20.0:
+                return None
+            if vote is not None and vote.score >= -sil.image_veto_score:
+                return None
+            return (other.R, other.t) if self._decided_under_tones(views, False, timer) else None
         return None
 
     def _valid_prior(self, max_gap: int | None = None) -> tuple[np.ndarray, np.ndarray] | None:

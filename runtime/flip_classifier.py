@@ -10,8 +10,7 @@ two poses, and returns the probability that the first is the right one. The esti
   ``veto_prob``, is reported ``weak_votes``;
 * to **decide**: a frame the outline leaves undecided, whose winner fits the outline within
   ``max_chamfer_px`` and whose stereo depth tolerance is at most ``max_depth_tolerance_m``, is decided for
-  the pose the classifier gives at least ``decide_prob``; with a ``second_file``, a second graph may decide a
-  frame the first leaves open, for the side the first leans to (``second_agree_prob``).
+  the pose the classifier gives at least ``decide_prob``.
 
 Both thresholds are chosen on training frames (``bundle.json``), never by the exporter.
 """
@@ -65,14 +64,6 @@ class FlipClassifierConfig:
         1: no such check. On a restyled frame of session 37 the classifier decided a pose 178.9° off at p
         0.9998 that it gives 0.991 with its grey plane's tone curve raised to 1/2 (session 38). The shipped
         bundle sets 2 since session 39 (``reports/tone_s39/rule.txt``).
-    second_file: a second graph of the same kind, in the bundle folder ("": none). Where the first graph does not
-        decide a frame, the second may: it decides the side ``s`` (the winner or its flip) it gives at least
-        ``decide_prob`` at the view and at the tone powers of ``decide_tone_gamma``, when the first gives ``s`` at
-        least ``second_agree_prob`` at the view and at those tone powers, and every other gate of the decision
-        holds. The veto and the backing gates (``loose_fit_min_prob``, ``registration_min_prob``) read the first
-        graph alone. Session 41 (``reports/flip_s41/plan.txt``): session 40's classifier, surer than the shipped one
-        but wrong on 2 of 192 decided views, made no wrong decision where the shipped one agreed at 0.9.
-    second_agree_prob: see ``second_file``; in [0.5, 1].
     """
 
     file: str = "flip.onnx"
@@ -87,8 +78,6 @@ class FlipClassifierConfig:
     loose_fit_min_prob: float = 0.0
     registration_min_prob: float = 0.0
     decide_tone_gamma: float = 1.0
-    second_file: str = ""
-    second_agree_prob: float = 1.0
 
     def __post_init__(self) -> None:
         if self.size < 16:
@@ -106,10 +95,6 @@ class FlipClassifierConfig:
                 raise ValueError(f"flip_classifier.{key} must be in [0, 1], got {getattr(self, key)}")
         if not 1.0 <= self.decide_tone_gamma <= 4.0:
             raise ValueError(f"flip_classifier.decide_tone_gamma must be in [1, 4], got {self.decide_tone_gamma}")
-        if not 0.5 <= self.second_agree_prob <= 1.0:
-            raise ValueError(f"flip_classifier.second_agree_prob must be in [0.5, 1], got {self.second_agree_prob}")
-        if self.second_file and self.second_file == self.file:
-            raise ValueError(f"flip_classifier.second_file must be another graph than file ({self.file!r})")
 
 
 def parse_flip_classifier(section: Any) -> FlipClassifierConfig | None:
@@ -154,18 +139,14 @@ class FlipClassifier:
         from .onnx_session import make_session, session_metadata
 
         self.config = config
+        path = Path(folder) / config.file
+        self.session = make_session(path, threads=threads, mem_arena=True)
+        meta = session_metadata(self.session)
         expect = {"kind": "flip", "size": config.size, "axis": config.axis, "channels": CHANNELS, "target": target}
-        sessions = []
-        for name in (config.file, config.second_file) if config.second_file else (config.file,):
-            path = Path(folder) / name
-            session = make_session(path, threads=threads, mem_arena=True)
-            meta = session_metadata(session)
-            for key, value in expect.items():
-                if key not in meta or meta[key] != value:
-                    raise BundleError(f"flip graph {path.name}: metadata {key}={meta.get(key)!r}, "
-                                      f"bundle expects {value!r}")
-            sessions.append((session, meta))
-        (self.session, self.metadata), self.second = sessions[0], (sessions[1][0] if len(sessions) > 1 else None)
+        for key, value in expect.items():
+            if key not in meta or meta[key] != value:
+                raise BundleError(f"flip graph {path.name}: metadata {key}={meta.get(key)!r}, bundle expects {value!r}")
+        self.metadata = meta
 
     def views(self, image: np.ndarray, K_full: np.ndarray, window: tuple[int, int, int],
               silhouette_points: np.ndarray, pose_a: tuple[np.ndarray, np.ndarray],
@@ -174,11 +155,9 @@ class FlipClassifier:
         over the full-frame ``window`` ``(x0, y0, side)`` (:func:`spacepose.flip_views.flip_views`)."""
         return flip_views(image, K_full, window, silhouette_points, pose_a, pose_b, self.config.size)[None]
 
-    def _probabilities(self, views: np.ndarray, session: Any = None) -> np.ndarray:
-        """(N,) float64 probabilities that the first pose of each of the (N, 3, S, S) ``views`` is the right one
-        (``session``: the first graph's unless given)."""
-        run = (self.session if session is None else session).run
-        logit = run(["logit"], {"views": views})[0].reshape(-1).astype(np.float64)
+    def _probabilities(self, views: np.ndarray) -> np.ndarray:
+        """(N,) float64 probabilities that the first pose of each of the (N, 3, S, S) ``views`` is the right one."""
+        logit = self.session.run(["logit"], {"views": views})[0].reshape(-1).astype(np.float64)
         return 1.0 / (1.0 + np.exp(-np.clip(logit, -60.0, 60.0)))
 
     def probability(self, views: np.ndarray) -> float:
@@ -194,16 +173,3 @@ class FlipClassifier:
         if not (np.isfinite(gamma) and gamma > 0.0):
             raise ValueError(f"toned_probabilities: gamma must be finite and > 0, got {gamma}")
         return self._probabilities(np.concatenate([toned_views(views, gamma), toned_views(views, 1.0 / gamma)]))
-
-    def second_probabilities(self, views: np.ndarray, gamma: float) -> np.ndarray:
-        """(3,) probabilities the second graph (``second_file``) gives the first pose of ``views`` (1, 3, S, S;
-        :meth:`views`) as they are and with the grey plane raised to ``gamma`` and ``1 / gamma`` (one run);
-        ``(1,)``, the views as they are, when ``gamma`` is 1. RuntimeError without a second graph."""
-        if self.second is None:
-            raise RuntimeError("this flip classifier has no second graph (flip_classifier.second_file)")
-        if views.ndim != 4 or views.shape[0] != 1 or views.shape[1] != CHANNELS:
-            raise ValueError(f"second_probabilities takes (1, {CHANNELS}, S, S) views, got {views.shape}")
-        if not (np.isfinite(gamma) and gamma >= 1.0):
-            raise ValueError(f"second_probabilities: gamma must be finite and >= 1, got {gamma}")
-        batch = [views] if gamma == 1.0 else [views, toned_views(views, gamma), toned_views(views, 1.0 / gamma)]
-        return self._probabilities(np.concatenate(batch), self.second)

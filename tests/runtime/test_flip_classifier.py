@@ -147,10 +147,10 @@ def test_bundle_section_needs_the_silhouette_stage_and_the_graph(tmp_path):
     assert load_bundle(est.bundle.path).flip_classifier == FlipClassifierConfig(size=SIZE)
 
 
-def _flip_estimator(tmp_path, monkeypatch, prob, silhouette=None, *, registration=None, _second=False, **section):
+def _flip_estimator(tmp_path, monkeypatch, prob, silhouette=None, *, registration=None, **section):
     """The outline-stage estimator of test_silhouette with a flip graph whose probability is ``prob``
     (``silhouette``: more keys of the bundle's silhouette section; ``registration``: its registration section,
-    by default one that never decides; ``_second``: write a second graph, flip2.onnx, too)."""
+    by default one that never decides)."""
     from test_silhouette import _estimator
 
     from spacepose.calibration.rig import paper_rig
@@ -163,8 +163,6 @@ def _flip_estimator(tmp_path, monkeypatch, prob, silhouette=None, *, registratio
     data["flip_classifier"] = {"size": SIZE, "decide_prob": 0.9, "veto_prob": 0.1, "max_chamfer_px": 1.5, **section}
     (est.bundle.path / "bundle.json").write_text(json.dumps(data))
     make_flip_graph(est.bundle.path / "flip.onnx")
-    if _second:
-        make_flip_graph(est.bundle.path / "flip2.onnx")
     monkeypatch.setattr(FlipClassifier, "probability", lambda self, views: prob)
     return PoseEstimator(paper_rig(640, 480), bundle=load_bundle(est.bundle.path), threads=1)
 
@@ -560,124 +558,3 @@ def test_the_shipped_bundle_has_the_gates_of_sessions_35_38_and_39():
     assert fc.max_depth_tolerance_m == 1.0
     assert (fc.decide_prob, fc.veto_prob, fc.max_chamfer_px, fc.decide_tone_gamma) == (0.995, 0.05, 1.5, 2.0)
     assert (sil.max_chamfer_px, sil.image_min_score, sil.image_max_chamfer_px) == (1.5, 0.05, 2.0)
-
-
-@pytest.mark.parametrize("section, match", [
-    ({"second_agree_prob": 0.4}, "second_agree_prob"), ({"second_agree_prob": 1.5}, "second_agree_prob"),
-    ({"second_file": "flip.onnx"}, "second_file"), ({"second_file": 2}, "string"),
-])
-def test_bad_second_graph_keys_are_refused(section, match):
-    with pytest.raises(BundleError, match=match):
-        parse_flip_classifier(section)
-
-
-def test_the_second_graph_is_checked_like_the_first_and_scores_the_tones_in_one_run(tmp_path):
-    make_flip_graph(tmp_path / "flip.onnx", gain=5.0)
-    make_flip_graph(tmp_path / "flip2.onnx", gain=-5.0)          # it scores the other way: not the first graph
-    config = FlipClassifierConfig(size=SIZE, second_file="flip2.onnx", second_agree_prob=0.9)
-    clf = FlipClassifier(tmp_path, config, "tiny")
-    assert FlipClassifier(tmp_path, FlipClassifierConfig(size=SIZE), "tiny").second is None
-    pts = _points()
-    R, t = np.eye(3), np.array([0.0, 0.0, 20.0])
-    Rf, tf = flipped_pose(R, t, np.zeros(3), "z")
-    rng = np.random.default_rng(4)
-    image = rng.integers(40, 110, (480, 640)).astype(np.uint8)
-    views = clf.views(image, K, (230, 150, 180), pts, (R, t), (Rf, tf))
-    first = [clf.probability(views), *clf.toned_probabilities(views, 2.0)]
-    got = clf.second_probabilities(views, 2.0)
-    assert got.shape == (3,) and got == pytest.approx([1.0 - p for p in first], abs=1e-5)
-    assert clf.second_probabilities(views, 1.0) == pytest.approx([1.0 - first[0]], abs=1e-6)
-    with pytest.raises(ValueError, match="gamma"):
-        clf.second_probabilities(views, 0.5)
-    with pytest.raises(ValueError, match="views"):
-        clf.second_probabilities(views[0], 2.0)
-    with pytest.raises(RuntimeError, match="second graph"):
-        FlipClassifier(tmp_path, FlipClassifierConfig(size=SIZE), "tiny").second_probabilities(views, 2.0)
-    make_flip_graph(tmp_path / "bad.onnx", metadata={"kind": "flip", "size": SIZE, "axis": "z", "channels": 3,
-                                                    "target": "other"})
-    with pytest.raises(BundleError, match="bad.onnx: metadata target"):
-        FlipClassifier(tmp_path, dataclasses.replace(config, second_file="bad.onnx"), "tiny")
-
-
-def test_a_bundle_naming_a_second_graph_must_hold_it_and_quantized_copies_keep_it(tmp_path):
-    from test_silhouette import _estimator
-
-    from spacepose.export.quantize import quantize_bundle
-
-    est = _estimator(tmp_path, {"min_margin": 0.99}, {"max_chamfer_px": 1.0, "min_margin_px": 0.5})
-    data = json.loads((est.bundle.path / "bundle.json").read_text())
-    data["flip_classifier"] = {"size": SIZE, "decide_prob": 0.9, "second_file": "flip2.onnx", "second_agree_prob": 0.9}
-    (est.bundle.path / "bundle.json").write_text(json.dumps(data))
-    make_flip_graph(est.bundle.path / "flip.onnx")
-    with pytest.raises(BundleError, match="missing flip2.onnx"):
-        load_bundle(est.bundle.path)
-    make_flip_graph(est.bundle.path / "flip2.onnx", gain=7.0)
-    assert load_bundle(est.bundle.path).flip_classifier.second_file == "flip2.onnx"
-    out = quantize_bundle(est.bundle.path, tmp_path / "fp16", "fp16")
-    assert (out / "flip2.onnx").read_bytes() == (est.bundle.path / "flip2.onnx").read_bytes()
-
-
-@pytest.mark.parametrize("prob, toned, second, valid, flipped, second_ran", [
-    (0.995, (0.995, 0.996), None, True, False, False),           # the first graph decides: the second is not run
-    (0.95, (0.95, 0.92), (0.999, 0.998, 0.997), True, False, True),   # the first leans >= 0.9, the second decides
-    (0.05, (0.02, 0.08), (0.001, 0.002, 0.003), True, True, True),    # ... the flip, likewise
-    (0.95, (0.95, 0.85), (0.999, 0.998, 0.997), False, False, False),  # the first under 0.9 at a tone: not asked
-    (0.85, (0.95, 0.95), (0.999, 0.998, 0.997), False, False, False),  # ... at the view: not asked
-    (0.95, (0.95, 0.92), (0.999, 0.98, 0.997), False, False, True),    # the second unsure at a tone: refused
-    (0.95, (0.95, 0.92), (0.001, 0.002, 0.003), False, False, True),   # the second says the flip: refused
-    (0.999, (0.999, 0.97), (0.999, 0.998, 0.997), True, False, True),  # the first fails its tones, the second holds
-])
-def test_a_second_graph_decides_only_where_the_first_leans_its_way(tmp_path, monkeypatch, prob, toned, second, valid,
-                                                                   flipped, second_ran):
-    import spacepose.estimator as estimator_module
-    from _bundle_fixtures import synthetic_pair
-    from spacepose.registration import rotation_angle_deg
-
-    left, right = synthetic_pair()
-    est = _flip_estimator(tmp_path, monkeypatch, prob, decide_prob=0.99, decide_tone_gamma=2.0,
-                          second_file="flip2.onnx", second_agree_prob=0.9, _second=True)
-    calls = []
-
-    def fake_second(self, views, gamma):
-        calls.append((views.shape, gamma))
-        return np.asarray(second)
-
-    monkeypatch.setattr(FlipClassifier, "toned_probabilities", lambda self, views, gamma: np.asarray(toned))
-    monkeypatch.setattr(FlipClassifier, "second_probabilities", fake_second)
-    seen = {}
-    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, seen, 1.2, 0.3))
-    monkeypatch.setattr(estimator_module, "polish_pose", lambda *a, **k: None)
-    res = est.estimate(left, right)
-    assert res.valid == valid, res.detail
-    assert calls == ([((1, 3, SIZE, SIZE), 2.0)] if second_ran else [])
-    assert res.flip_prob == prob
-    if valid:
-        assert res.decided_by == "classifier" and (rotation_angle_deg(res.R, seen["R"]) > 90.0) == flipped
-        if second_ran:
-            assert res.flip_second_prob == second[0]
-        else:
-            assert np.isnan(res.flip_second_prob)
-    else:
-        assert res.status == "weak_votes" and np.isnan(res.flip_second_prob)
-
-
-@pytest.mark.parametrize("chamfer, vote, other_turn", [
-    (1.8, None, 0.0),                                    # the winner fits the outline too loosely
-    (1.2, ImageVote(-0.3, 500, 0.0, 0.1, True), 0.0),     # the image vote says no
-])
-def test_a_second_graph_is_held_to_the_first_graphs_gates(tmp_path, monkeypatch, chamfer, vote, other_turn):
-    import spacepose.estimator as estimator_module
-    from _bundle_fixtures import synthetic_pair
-
-    left, right = synthetic_pair()
-    est = _flip_estimator(tmp_path, monkeypatch, 0.95, decide_prob=0.99, second_file="flip2.onnx",
-                          second_agree_prob=0.9, _second=True)
-    monkeypatch.setattr(FlipClassifier, "second_probabilities", lambda self, views, gamma: np.array([0.9999]))
-    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, chamfer, 0.3, vote, other_turn))
-    monkeypatch.setattr(estimator_module, "polish_pose", lambda *a, **k: None)
-    res = est.estimate(left, right)
-    assert not res.valid and res.status == "weak_votes", res.detail
-    # the same frame without those failures is decided by the second graph
-    monkeypatch.setattr(estimator_module, "decide_outline", _decision(est, {}, 1.2, 0.3))
-    res = est.estimate(left, right)
-    assert res.valid and res.flip_second_prob == 0.9999
