@@ -249,6 +249,8 @@ def quantize_bundle(bundle_dir: str | Path | None, out: str | Path, precision: s
         convert_fp16(pose_src, out / pose_src.name)
     if src.flip_classifier is not None:   # small, and it decides flips: it stays float32 (model card)
         shutil.copyfile(src_dir / src.flip_classifier.file, out / src.flip_classifier.file)
+    if src.outline_refiner is not None:   # small, and it shapes the polish's outline: float32 too
+        shutil.copyfile(src_dir / src.outline_refiner.file, out / src.outline_refiner.file)
     manifest = json.loads((src_dir / "bundle.json").read_text())
     (out / "bundle.json").write_text(json.dumps(manifest, indent=1) + "\n")
     card = (src_dir / "MODEL_CARD.md").read_text(encoding="utf-8") if (src_dir / "MODEL_CARD.md").exists() else ""

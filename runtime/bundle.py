@@ -48,6 +48,9 @@ A bundle is a folder::
                           "decide_prob": 0.97, "veto_prob": 0.1},   # optional, needs silhouette: a
                                        # graph that tells the outline's winner from its flip in the
                                        # left image (spacepose.flip_classifier.FlipClassifierConfig)
+      "outline_refiner": {"file": "outline.onnx", "grow_px": 2},   # optional, needs the
+                                       # silhouette's polish: a graph that sharpens the stereo outline
+                                       # the polish reads (spacepose.outline_refiner)
       "uncertainty": {"range_k": 0.3, "lateral_px": 0.5, "lateral_floor_m": 0.02,
                       "rotation_k_deg": 20.0, "rotation_floor_deg": 0.0,
                       "rotation_chamfer_deg": 1.5},   # optional, needs
@@ -93,6 +96,7 @@ import numpy as np
 from .confidence import ConfidenceConfig, parse_confidence
 from .errors import BundleError
 from .flip_classifier import FlipClassifierConfig, parse_flip_classifier
+from .outline_refiner import OutlineRefinerConfig, parse_outline_refiner
 from .uncertainty import PositionUncertaintyConfig, UncertaintyConfig, parse_position_uncertainty, parse_uncertainty
 from .pose_inputs import PoseInputSpec
 from .registration import RegistrationConfig
@@ -230,6 +234,8 @@ class ModelBundle:
         silhouette: outline-stage settings, ``None`` when the bundle does not use it.
         flip_classifier: the optional flip graph's section (:mod:`spacepose.flip_classifier`), ``None``
             when the bundle has none.
+        outline_refiner: the optional outline graph's section (:mod:`spacepose.outline_refiner`: the polish
+            reads its refined outline), ``None`` when the bundle has none.
         uncertainty: the optional per-frame uncertainty model (:mod:`spacepose.uncertainty`), ``None``
             when the bundle has none (no covariance is then reported).
         position_uncertainty: the optional covariance model of a position reported without a pose
@@ -266,6 +272,7 @@ class ModelBundle:
     silhouette_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     silhouette: SilhouetteConfig | None = None
     flip_classifier: FlipClassifierConfig | None = None
+    outline_refiner: OutlineRefinerConfig | None = None
     uncertainty: UncertaintyConfig | None = None
     position_uncertainty: PositionUncertaintyConfig | None = None
     confidence: ConfidenceConfig | None = None
@@ -675,6 +682,7 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         silhouette_points=_frozen(outline),
         silhouette=_parse_silhouette(data.get("silhouette"), len(outline), data.get("registration") is not None),
         flip_classifier=_parse_flip(data),
+        outline_refiner=_parse_outline_refiner(data),
         uncertainty=_parse_uncertainty(data, "uncertainty", parse_uncertainty),
         position_uncertainty=_parse_uncertainty(data, "position_uncertainty", parse_position_uncertainty),
         confidence=_parse_confidence(data),
@@ -685,6 +693,14 @@ def _parse_flip(data: Mapping[str, Any]) -> FlipClassifierConfig | None:
     config = parse_flip_classifier(data.get("flip_classifier"))
     if config is not None and data.get("silhouette") is None:
         raise BundleError("bundle.json: flip_classifier needs a silhouette section (it judges the outline's winner)")
+    return config
+
+
+def _parse_outline_refiner(data: Mapping[str, Any]) -> OutlineRefinerConfig | None:
+    config = parse_outline_refiner(data.get("outline_refiner"))
+    if config is not None and not (data.get("silhouette") or {}).get("polish"):
+        raise BundleError("bundle.json: outline_refiner needs a silhouette section with polish on (the polish reads "
+                          "its outline)")
     return config
 
 
@@ -773,6 +789,8 @@ def load_bundle(path: str | os.PathLike | None = None, verify_graphs: bool = Tru
     files = [("stereo", bundle.stereo_path), ("pose", bundle.pose_path)]
     if bundle.flip_classifier is not None:
         files.append(("flip", folder / bundle.flip_classifier.file))
+    if bundle.outline_refiner is not None:
+        files.append(("outline", folder / bundle.outline_refiner.file))
     for kind, file in files:
         if not file.is_file():
             raise BundleError(f"model bundle {folder} is missing {file.name}")

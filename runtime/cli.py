@@ -35,6 +35,8 @@ COMMANDS: dict[str, str] = {
     "export-pose": "spacepose.export.cli_export_pose",
     "train-flip": "spacepose.tools.train_flip",
     "export-flip": "spacepose.export.onnx_flip",
+    "train-outline": "spacepose.tools.train_outline",
+    "export-outline": "spacepose.export.onnx_outline",
     "quantize": "spacepose.export.cli_quantize",
     "recover-checkpoint": "spacepose.export.cli_recover",
     "reexport": "spacepose.export.cli_reexport",

@@ -48,6 +48,8 @@ from .confidence import calibrated_confidence, within_probability
 from .errors import ShapeError
 from .flip import flipped_pose, resolve_flip
 from .flip_classifier import FlipClassifier
+from .image_vote import crop_to_frame, window_grey
+from .outline_refiner import OutlineRefiner, refined_outline, refiner_planes
 from .outline_search import OutlineTemplates
 from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
@@ -433,6 +435,9 @@ class PoseEstimator:
         fc = self.bundle.flip_classifier
         self._flip_classifier = (FlipClassifier(self.bundle.path, fc, self.bundle.target_name, threads=self.threads)
                                  if fc is not None and self._outline_points is not None else None)
+        orf = self.bundle.outline_refiner
+        self._outline_refiner = (OutlineRefiner(self.bundle.path, orf, self.bundle.target_name, threads=self.threads)
+                                 if orf is not None and self._outline_points is not None else None)
         sil = self.bundle.silhouette
         self._outline_templates = (
             OutlineTemplates(self._outline_points, np.asarray(self.bundle.centre), float(self.bundle.radius),
@@ -791,7 +796,7 @@ class PoseEstimator:
             # wrong and nothing says which; report neither, and the next frame starts without a prior
             return _stage_invalid(stage, "weak_votes", {**factors, "prior_conflict": 1.0}), (
                 f"the pose is {turned:.0f}° from the previous valid pose")
-        decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer)
+        decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer, left_r, stereo.disparity)
         if refusal := self._polish_refusal(factors, decided):
             # a refused decision is no decision: the previous pose may still pick one, as without the classifier
             track = self._track(reg, prior, outline, margin) if prior is not None else ""
@@ -802,7 +807,7 @@ class PoseEstimator:
             (R, t), fallback = track
             confidence = 0.5 * reg.inlier_fraction
             factors.update(tracked=1.0, route=_route_code("tracked"))
-            decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer)
+            decided, R, t = self._polish(outline, R, t, xyz, reg, factors, timer, left_r, stereo.disparity)
             cap = 0.0 if bundle.silhouette is None else bundle.silhouette.max_refused_track_polish_deg
             if cap > 0.0 and decided is not None and factors.get("polish_deg", 0.0) > cap:
                 return _stage_invalid(stage, "weak_votes", factors), (
@@ -868,14 +873,40 @@ class PoseEstimator:
             return refined[0], tracked
         return tracked, None
 
+    def _refined(self, outline: Any, left_r: np.ndarray | None, disparity: np.ndarray | None,
+                 timer: StageTimer) -> Any:
+        """``outline`` (an :class:`spacepose.silhouette.OutlineDecision`) with its observed outline refined by the
+        bundle's ``outline_refiner`` graph (:mod:`spacepose.outline_refiner`) against the rectified left image
+        ``left_r`` and the full-frame ``disparity``; unchanged without the graph, an outline, the image or the
+        disparity. The graph's run is network time."""
+        if (self._outline_refiner is None or left_r is None or disparity is None or outline.frame is None
+                or outline.observed is None or not (outline.min_disparity > 0.0)):
+            return outline
+        fr = outline.frame
+        with timer.stage("silhouette"):
+            grey = window_grey(left_r, fr.x0, fr.y0, fr.side, fr.size)
+            ratio = crop_to_frame(np.asarray(disparity, dtype=np.float32), fr.x0, fr.y0, fr.side,
+                                  fr.size) / np.float32(outline.min_disparity)
+            planes = refiner_planes(grey, outline.observed, ratio)
+        with timer.stage("outline_net"):
+            t_net = time.perf_counter()
+            logit = self._outline_refiner.logits(planes)
+            timer.add_network((time.perf_counter() - t_net) * 1e3)
+        refined = refined_outline(logit, outline.observed, self._outline_refiner.config.grow_px)
+        return dataclasses.replace(outline, observed=refined)
+
     def _polish(self, outline: Any, R: np.ndarray, t: np.ndarray, xyz: np.ndarray, reg: Any, factors: dict,
-                timer: StageTimer) -> tuple[tuple[np.ndarray, np.ndarray] | None, np.ndarray, np.ndarray]:
+                timer: StageTimer, left_r: np.ndarray | None = None, disparity: np.ndarray | None = None
+                ) -> tuple[tuple[np.ndarray, np.ndarray] | None, np.ndarray, np.ndarray]:
         """``(decided, R, t)``: with the silhouette stage's ``polish``, the pose refined once more against
         the outline (``decided`` the pose before it; ``polish_deg`` and ``polish_m`` added to
-        ``factors``), else ``(None, R, t)``."""
+        ``factors``), else ``(None, R, t)``. With the bundle's ``outline_refiner``, the outline the polish reads
+        is the refined one (:meth:`_refined`; ``left_r``, ``disparity``: the rectified left image and the
+        full-frame disparity)."""
         sil = self.bundle.silhouette
         if outline is None or not sil.polish:
             return None, R, t
+        outline = self._refined(outline, left_r, disparity, timer)
         with timer.stage("silhouette"):
             polished = polish_pose(outline, R, t, self._outline_points, sil, stereo_points=xyz,
                                    surface=self._registration, tau_m=reg.tau_m)

@@ -511,7 +511,8 @@ class OutlineDecision:
     ``vote``: the left image's vote for ``best`` against its exact flip (against ``other`` when no flip
     was given; :mod:`spacepose.image_vote`), ``None`` when it was not taken (no image, the stage's
     ``image_vote`` off, or neither a flip nor a rival). ``frame``, ``observed``: the silhouette frame
-    and the observed (n, n) outline the candidates were refined against (for :func:`polish_pose`)."""
+    and the observed (n, n) outline the candidates were refined against (for :func:`polish_pose`);
+    ``min_disparity``: the disparity (pixels) that outline is thresholded at."""
 
     best: OutlineFit
     other: OutlineFit
@@ -521,6 +522,7 @@ class OutlineDecision:
     vote: ImageVote | None = None
     frame: SilhouetteFrame | None = None
     observed: np.ndarray | None = None
+    min_disparity: float = float("nan")
 
     def decided(self, config: SilhouetteConfig) -> bool:
         """Whether the outline picks ``best``: a fine enough fit and a clear enough gap, or (with
@@ -585,8 +587,8 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
     frame = silhouette_frame(K_full, *window, config.max_side_px)
     distance = float(np.mean([np.linalg.norm(t) for _, t in candidates]))
     far = distance + config.depth_margin_m
-    observed = observed_mask(np.asarray(disparity, dtype=np.float32), frame,
-                             float(K_full[0, 0]) * float(baseline_m) / max(far, 1e-6))
+    min_disparity = float(K_full[0, 0]) * float(baseline_m) / max(far, 1e-6)
+    observed = observed_mask(np.asarray(disparity, dtype=np.float32), frame, min_disparity)
 
     edges = observed_edges(observed)
 
@@ -627,7 +629,7 @@ def decide_outline(candidates: list[tuple[np.ndarray, np.ndarray]], silhouette_p
     return OutlineDecision(best=best, other=other, best_index=min(order[0], len(candidates)),
                            margin_px=float(margin) if math.isfinite(margin) else 0.0,
                            turned_deg=float(rotation_angle_deg(best.R, other.R)) if rivals else float("nan"),
-                           vote=vote, frame=frame, observed=observed)
+                           vote=vote, frame=frame, observed=observed, min_disparity=min_disparity)
 
 
 def align_centroid(R: np.ndarray, t: np.ndarray, silhouette_points: np.ndarray, observed: np.ndarray,
