@@ -900,18 +900,27 @@ class PoseEstimator:
                 ) -> tuple[tuple[np.ndarray, np.ndarray] | None, np.ndarray, np.ndarray]:
         """``(decided, R, t)``: with the silhouette stage's ``polish``, the pose refined once more against
         the outline (``decided`` the pose before it; ``polish_deg`` and ``polish_m`` added to
-        ``factors``), else ``(None, R, t)``. With the bundle's ``outline_refiner``, the outline the polish reads
-        is the refined one (:meth:`_refined`; ``left_r``, ``disparity``: the rectified left image and the
-        full-frame disparity)."""
+        ``factors``), else ``(None, R, t)``. With the bundle's ``outline_refiner``, a polish that succeeded is
+        done again against the refined outline (:meth:`_refined`; ``left_r``, ``disparity``: the rectified left
+        image and the full-frame disparity), and when that succeeds too its rotation is kept, with the target's
+        centre where the first polish put it (``keep_centre``) or its own position."""
         sil = self.bundle.silhouette
         if outline is None or not sil.polish:
             return None, R, t
-        outline = self._refined(outline, left_r, disparity, timer)
         with timer.stage("silhouette"):
             polished = polish_pose(outline, R, t, self._outline_points, sil, stereo_points=xyz,
                                    surface=self._registration, tau_m=reg.tau_m)
         if polished is None:
             return None, R, t
+        refined = self._refined(outline, left_r, disparity, timer)
+        if refined is not outline:
+            with timer.stage("silhouette"):
+                fit = polish_pose(refined, R, t, self._outline_points, sil, stereo_points=xyz,
+                                  surface=self._registration, tau_m=reg.tau_m)
+            if fit is not None and self._outline_refiner.config.keep_centre:
+                centre = np.asarray(self.bundle.centre, dtype=np.float64)
+                fit = dataclasses.replace(fit, t=polished.R @ centre + polished.t - fit.R @ centre)
+            polished = polished if fit is None else fit
         factors.update(polish_deg=float(rotation_angle_deg(R, polished.R)),
                        polish_m=float(np.linalg.norm(polished.t - np.asarray(t))))
         return (R, t), polished.R, polished.t

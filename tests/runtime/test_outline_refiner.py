@@ -43,6 +43,7 @@ def make_outline_graph(path: Path, metadata: dict | None = None, gain: float = 1
 
 @pytest.mark.parametrize("section, match", [
     ([], "must be an object"), ({"bogus": 1}, "unknown keys"), ({"file": 3}, "string"), ({"file": ""}, "string"),
+    ({"keep_centre": 2}, "keep_centre"), ({"keep_centre": 0.5}, "integer"),
     ({"grow_px": 1.5}, "integer"), ({"grow_px": True}, "integer"), ({"grow_px": -1}, "grow_px"),
     ({"grow_px": 9}, "grow_px"),
 ])
@@ -210,3 +211,53 @@ def test_quantized_copies_keep_the_outline_graph_float32(tmp_path):
     out = quantize_bundle(est.bundle.path, tmp_path / "fp16", "fp16")
     assert (out / "outline.onnx").read_bytes() == (est.bundle.path / "outline.onnx").read_bytes()
     assert load_bundle(out).outline_refiner == OutlineRefinerConfig(grow_px=1)
+
+
+@pytest.mark.parametrize("keep_centre, refined_ok", [(1, True), (0, True), (1, False)])
+def test_the_refined_polish_gives_the_rotation_and_the_stereo_polish_the_centre(tmp_path, monkeypatch, keep_centre,
+                                                                                 refined_ok):
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+
+    from spacepose.calibration.rig import paper_rig
+    from spacepose.registration import exp_so3
+    from spacepose.silhouette import OutlineFit
+
+    left, right = synthetic_pair()
+    est, PoseEstimator = _refiner_estimator(tmp_path)
+    data = json.loads((est.bundle.path / "bundle.json").read_text())
+    data["outline_refiner"]["keep_centre"] = keep_centre
+    (est.bundle.path / "bundle.json").write_text(json.dumps(data))
+    make_outline_graph(est.bundle.path / "outline.onnx", metadata={"kind": "outline", "planes": 3, "multiple": 4,
+                                                                   "target": est.bundle.target_name})
+    bundle = load_bundle(est.bundle.path)
+    with_refiner = PoseEstimator(paper_rig(640, 480), bundle=bundle, threads=1)
+    decide = estimator_module.decide_outline
+    seen = {}
+
+    def recording_decide(*args, **kwargs):
+        seen["decision"] = decide(*args, **kwargs)
+        return seen["decision"]
+
+    turn_a, turn_b = exp_so3(np.radians([1.0, 0.0, 0.0])), exp_so3(np.radians([0.0, 1.5, 0.0]))
+
+    def polish(decision, R, t, *args, **kwargs):
+        if np.array_equal(decision.observed, seen["decision"].observed):       # the stereo outline
+            return OutlineFit(turn_a @ R, np.asarray(t) + [0.01, 0.0, 0.05], 0.5)
+        return OutlineFit(turn_b @ R, np.asarray(t) + [0.0, -0.02, 0.3], 0.5) if refined_ok else None
+
+    monkeypatch.setattr(estimator_module, "decide_outline", recording_decide)
+    monkeypatch.setattr(estimator_module, "polish_pose", polish)
+    res = with_refiner.estimate(left, right)
+    assert res.valid, res.detail
+    R0, t0 = res.decided
+    centre = np.asarray(bundle.centre)
+    if not refined_ok:                                   # the stereo polish stands
+        np.testing.assert_allclose(res.R, turn_a @ R0, atol=1e-9)
+        np.testing.assert_allclose(res.t, t0 + [0.01, 0.0, 0.05], atol=1e-9)
+        return
+    np.testing.assert_allclose(res.R, turn_b @ R0, atol=1e-9)
+    if keep_centre:
+        np.testing.assert_allclose(res.R @ centre + res.t, turn_a @ R0 @ centre + t0 + [0.01, 0.0, 0.05], atol=1e-9)
+    else:
+        np.testing.assert_allclose(res.t, t0 + [0.0, -0.02, 0.3], atol=1e-9)
