@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import refiner as rf  # noqa: E402
 
-FORMS = ("base", "refined", "truemask")
+FORMS = ("base", "refined", "refined_w0.5", "refined_w1", "hybrid", "truemask")
 
 
 def run(dataset: str, ckpt: str, split: str, skip: int, limit: int, out: str) -> None:
@@ -36,10 +36,10 @@ def run(dataset: str, ckpt: str, split: str, skip: int, limit: int, out: str) ->
     from spacepose.tools.pose_data import read_pose_labels
 
     net = rf._load_net(ckpt)
+    model = load_bundle(None)
     root = Path(dataset)
     records = read_pose_labels(root, split)[skip: skip + limit]
-    estimator = est_mod.PoseEstimator(load_rig(root / "rig.yaml"), bundle=load_bundle(None), threads=1,
-                                      use_prior=False)
+    estimator = est_mod.PoseEstimator(load_rig(root / "rig.yaml"), bundle=model, threads=1, use_prior=False)
     orig_decide, orig_polish = est_mod.decide_outline, est_mod.polish_pose
     state: dict = {}
 
@@ -64,6 +64,16 @@ def run(dataset: str, ckpt: str, split: str, skip: int, limit: int, out: str) ->
         forms = {"base": shipped}
         for name, obs in (("refined", refined), ("truemask", truth)):
             forms[name] = orig_polish(dataclasses.replace(decision, observed=obs), R, t, points, config, **kw)
+        for w in (0.5, 1.0):
+            forms[f"refined_w{w:g}"] = orig_polish(dataclasses.replace(decision, observed=refined), R, t, points,
+                                                   dataclasses.replace(config, polish_range_weight=w), **kw)
+        ref = forms["refined"]
+        if shipped is not None and ref is not None:     # the refined rotation, the shipped polish's centre
+            centre = np.asarray(model.centre, dtype=np.float64)
+            c = shipped.R @ centre + shipped.t
+            forms["hybrid"] = dataclasses.replace(ref, t=c - ref.R @ centre)
+        else:
+            forms["hybrid"] = None
         state["forms"] = forms
         state["iou"] = {"stereo": rf.iou(decision.observed, truth), "refined": rf.iou(refined, truth)}
         return shipped
@@ -84,8 +94,10 @@ def run(dataset: str, ckpt: str, split: str, skip: int, limit: int, out: str) ->
             row["iou"] = state["iou"]
             for name in FORMS:
                 fit = f[name]
+                los = np.asarray(rec.t, dtype=np.float64) / np.linalg.norm(rec.t)
                 row[name] = (None if fit is None else [float(np.linalg.norm(fit.t - rec.t)),
-                                                       float(rotation_error_deg(rec.R, fit.R))])
+                                                       float(rotation_error_deg(rec.R, fit.R)),
+                                                       float(np.dot(fit.t - rec.t, los))])
         rows.append(row)
         if (i + 1) % 50 == 0:
             print(f"{i + 1}/{len(records)} frames, {sum(r['polished'] for r in rows)} polished valid", flush=True)
@@ -96,15 +108,18 @@ def run(dataset: str, ckpt: str, split: str, skip: int, limit: int, out: str) ->
 def table(paths: list[str]) -> None:
     rows = [r for p in paths for r in json.load(gzip.open(p, "rt"))["rows"] if r["polished"]]
     print(f"{len(rows)} valid polished poses ({', '.join(paths)})")
-    print("| form | poses | mean e_t | mean / median e_R | within 0.10 m / 2 deg | median IoU |")
-    print("|---|---|---|---|---|---|")
+    print("| form | poses | mean e_t | mean signed range error | mean / median e_R | within 0.10 m / 2 deg | median IoU |")
+    print("|---|---|---|---|---|---|---|")
     for name in FORMS:
-        e = np.array([r[name] if r[name] is not None else r["base"] for r in rows])
+        if any(name not in r for r in rows):
+            continue
+        # a form that refused (past the polish caps, not finite) leaves the shipped pose
+        e = np.array([(r[name] if r[name] is not None else r["base"]) + [np.nan] * 3 for r in rows])[:, :3]
         within = int(((e[:, 0] <= 0.10) & (e[:, 1] <= 2.0)).sum())
-        io = {"base": "stereo", "refined": "refined"}.get(name)
+        io = {"base": "stereo", "refined": "refined", "truemask": None}.get(name, "refined")
         med = f"{np.median([r['iou'][io] for r in rows]):.3f}" if io else "1"
-        print(f"| {name} | {len(e)} | {e[:, 0].mean():.3f} m | {e[:, 1].mean():.2f} / {np.median(e[:, 1]):.2f} | "
-              f"{within} | {med} |")
+        print(f"| {name} | {len(e)} | {e[:, 0].mean():.3f} m | {np.nanmean(e[:, 2]):+.3f} m | {e[:, 1].mean():.2f} / "
+              f"{np.median(e[:, 1]):.2f} | {within} | {med} |")
 
 
 def main(argv: list[str]) -> int:
