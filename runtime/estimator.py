@@ -902,8 +902,9 @@ class PoseEstimator:
         the outline (``decided`` the pose before it; ``polish_deg`` and ``polish_m`` added to
         ``factors``), else ``(None, R, t)``. With the bundle's ``outline_refiner``, a polish that succeeded is
         done again against the refined outline (:meth:`_refined`; ``left_r``, ``disparity``: the rectified left
-        image and the full-frame disparity), and when that succeeds too its rotation is kept, with the target's
-        centre where the first polish put it (``keep_centre``) or its own position."""
+        image and the full-frame disparity), and when that succeeds too its rotation is reported, with the target's
+        centre where the first polish put it (``keep_centre``) or its own position. ``polish_deg`` and
+        ``polish_m``, which the polish caps read, are the first polish's in either case."""
         sil = self.bundle.silhouette
         if outline is None or not sil.polish:
             return None, R, t
@@ -912,6 +913,11 @@ class PoseEstimator:
                                    surface=self._registration, tau_m=reg.tau_m)
         if polished is None:
             return None, R, t
+        # the polish caps (_polish_refusal) read how far the polish against the stereo outline moved the pose,
+        # with or without the refiner: which poses are refused does not change with it (session 41, round 1: caps
+        # read on the refined polish refused a sixth of the valid poses)
+        factors.update(polish_deg=float(rotation_angle_deg(R, polished.R)),
+                       polish_m=float(np.linalg.norm(polished.t - np.asarray(t))))
         refined = self._refined(outline, left_r, disparity, timer)
         if refined is not outline:
             with timer.stage("silhouette"):
@@ -921,8 +927,6 @@ class PoseEstimator:
                 centre = np.asarray(self.bundle.centre, dtype=np.float64)
                 fit = dataclasses.replace(fit, t=polished.R @ centre + polished.t - fit.R @ centre)
             polished = polished if fit is None else fit
-        factors.update(polish_deg=float(rotation_angle_deg(R, polished.R)),
-                       polish_m=float(np.linalg.norm(polished.t - np.asarray(t))))
         return (R, t), polished.R, polished.t
 
     def _verify(self, stage: PoseStageResult, xyz: np.ndarray, left_r: np.ndarray, right_r: np.ndarray,

@@ -252,6 +252,8 @@ def test_the_refined_polish_gives_the_rotation_and_the_stereo_polish_the_centre(
     assert res.valid, res.detail
     R0, t0 = res.decided
     centre = np.asarray(bundle.centre)
+    assert res.polish_deg == pytest.approx(1.0, abs=1e-6)     # the caps read the stereo polish's turn, not 1.5 deg
+    assert res.polish_deg == pytest.approx(1.0, abs=1e-6)     # the caps read the stereo polish's turn, not 1.5 deg
     if not refined_ok:                                   # the stereo polish stands
         np.testing.assert_allclose(res.R, turn_a @ R0, atol=1e-9)
         np.testing.assert_allclose(res.t, t0 + [0.01, 0.0, 0.05], atol=1e-9)
