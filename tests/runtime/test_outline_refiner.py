@@ -263,3 +263,20 @@ def test_the_refined_polish_gives_the_rotation_and_the_stereo_polish_the_centre(
         np.testing.assert_allclose(res.R @ centre + res.t, turn_a @ R0 @ centre + t0 + [0.01, 0.0, 0.05], atol=1e-9)
     else:
         np.testing.assert_allclose(res.t, t0 + [0.0, -0.02, 0.3], atol=1e-9)
+
+
+def test_the_shipped_bundle_refines_the_outline_for_the_polish():
+    """reports/outline_s41/plan2.txt (met in session 41): the outline refiner, grow_px 2, keep_centre 1."""
+    from spacepose.outline_refiner import OutlineRefiner
+
+    bundle = load_bundle(None, verify_graphs=False)
+    assert bundle.outline_refiner == OutlineRefinerConfig(file="outline.onnx", grow_px=2, keep_centre=1)
+    graph = OutlineRefiner(bundle.path, bundle.outline_refiner, bundle.target_name)
+    assert graph.metadata["config"] == {"width": 16, "prior": 4.0}
+    obs = np.zeros((40, 40), np.uint8)
+    obs[8:32, 8:32] = 1
+    grey = np.where(obs > 0, 0.6, 0.0).astype(np.float32)
+    out = graph.refine(grey, obs, np.where(obs > 0, 1.5, 0.1).astype(np.float32))
+    assert out.shape == (40, 40) and out.dtype == np.uint8
+    inter, union = (out & obs).sum(), (out | obs).sum()
+    assert inter / union > 0.8           # a lit square with its own outline stays (near) itself
