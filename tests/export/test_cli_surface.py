@@ -24,15 +24,16 @@ def bundle_copy(tmp_path):
     folder.mkdir()
     for name in ("bundle.json", "MODEL_CARD.md"):
         shutil.copyfile(DEFAULT / name, folder / name)
-    for name in ("stereo.onnx", "pose.onnx", "flip.onnx"):  # graphs are only read for their metadata: link, don't copy
+    for name in ("stereo.onnx", "pose.onnx", "flip.onnx", "outline.onnx"):  # graphs only read for metadata: link them
         (folder / name).symlink_to(DEFAULT / name)
     return folder
 
 
 def _drop_flip_classifier(folder: Path) -> None:
-    """The bundle without its flip classifier section (which needs the silhouette stage)."""
+    """The bundle without its flip classifier and outline refiner sections (which need the silhouette stage)."""
     data = json.loads((folder / "bundle.json").read_text())
     data.pop("flip_classifier", None)
+    data.pop("outline_refiner", None)
     (folder / "bundle.json").write_text(json.dumps(data, indent=1))
 
 
@@ -102,8 +103,16 @@ def test_bad_arguments_are_refused(bundle_copy, argv):
 def test_writes_outline_samples_and_the_silhouette_section(bundle_copy):
     from spacepose.tools.targets import load_target
 
-    assert main(["export-surface", str(bundle_copy), "--count", "300", "--silhouette-count", "2000",
-                 "--silhouette", "max_chamfer_px=1.5", "min_margin_px=0.25"]) == 0
+    # --silhouette writes the section from the keys given: without polish the shipped outline refiner cannot load,
+    # so the call is refused and the bundle kept as it was
+    text = (bundle_copy / "bundle.json").read_text()
+    args = ["export-surface", str(bundle_copy), "--count", "300", "--silhouette-count", "2000",
+            "--silhouette", "max_chamfer_px=1.5", "min_margin_px=0.25"]
+    assert main(args) == 2 and (bundle_copy / "bundle.json").read_text() == text
+    data = json.loads(text)
+    data.pop("outline_refiner")
+    (bundle_copy / "bundle.json").write_text(json.dumps(data, indent=1))
+    assert main(args) == 0
     b = load_bundle(bundle_copy)
     assert b.silhouette_points.shape == (2000, 3)
     assert b.silhouette.max_chamfer_px == 1.5 and b.silhouette.min_margin_px == 0.25
