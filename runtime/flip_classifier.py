@@ -136,17 +136,11 @@ class FlipClassifier:
     """
 
     def __init__(self, folder: str | os.PathLike, config: FlipClassifierConfig, target: str, threads: int = 1) -> None:
-        from .onnx_session import make_session, session_metadata
+        from .onnx_session import checked_session
 
         self.config = config
-        path = Path(folder) / config.file
-        self.session = make_session(path, threads=threads, mem_arena=True)
-        meta = session_metadata(self.session)
         expect = {"kind": "flip", "size": config.size, "axis": config.axis, "channels": CHANNELS, "target": target}
-        for key, value in expect.items():
-            if key not in meta or meta[key] != value:
-                raise BundleError(f"flip graph {path.name}: metadata {key}={meta.get(key)!r}, bundle expects {value!r}")
-        self.metadata = meta
+        self.session, self.metadata = checked_session(Path(folder) / config.file, expect, "flip", threads=threads)
 
     def views(self, image: np.ndarray, K_full: np.ndarray, window: tuple[int, int, int],
               silhouette_points: np.ndarray, pose_a: tuple[np.ndarray, np.ndarray],

@@ -75,6 +75,19 @@ def session_metadata(session) -> dict[str, Any]:
     return _parse(meta.get(METADATA_KEY), "session")
 
 
+def checked_session(path: str | os.PathLike, expect: dict[str, Any], what: str, *, threads: int = 1):
+    """``(session, metadata)`` of the bundle graph at ``path`` (memory arena on), whose metadata must hold every
+    ``expect`` key with that value; BundleError naming ``what`` graph, the file, the key and both values otherwise
+    (and when the file is missing or unloadable)."""
+    session = make_session(path, threads=threads, mem_arena=True)
+    meta = session_metadata(session)
+    for key, value in expect.items():
+        if key not in meta or meta[key] != value:
+            raise BundleError(f"{what} graph {Path(path).name}: metadata {key}={meta.get(key)!r}, "
+                              f"bundle expects {value!r}")
+    return session, meta
+
+
 def read_metadata(path: str | os.PathLike) -> dict[str, Any]:
     """The JSON contract of the graph at ``path``, read with onnxruntime (no session kept)."""
     session = make_session(path, threads=1, optimize=False)

@@ -122,16 +122,11 @@ class OutlineRefiner:
     """
 
     def __init__(self, folder: str | os.PathLike, config: OutlineRefinerConfig, target: str, threads: int = 1) -> None:
-        from .onnx_session import make_session, session_metadata
+        from .onnx_session import checked_session
 
         self.config = config
-        path = Path(folder) / config.file
-        self.session = make_session(path, threads=threads, mem_arena=True)
-        meta = session_metadata(self.session)
-        for key, value in {"kind": "outline", "planes": PLANES, "multiple": MULTIPLE, "target": target}.items():
-            if meta.get(key) != value:
-                raise BundleError(f"outline graph {path.name}: metadata {key}={meta.get(key)!r}, expected {value!r}")
-        self.metadata = meta
+        expect = {"kind": "outline", "planes": PLANES, "multiple": MULTIPLE, "target": target}
+        self.session, self.metadata = checked_session(Path(folder) / config.file, expect, "outline", threads=threads)
 
     def logits(self, planes: np.ndarray) -> np.ndarray:
         """(n, n) float32 logits of the (3, n, n) ``planes`` (:func:`refiner_planes`; zero-padded to a multiple of

@@ -191,18 +191,12 @@ def run(args: argparse.Namespace) -> int:
     from spacepose.flip_views import toned_views
     from spacepose.tools.flip_data import augment_views
     from spacepose.tools.training_common import (JsonlLog, atomic_save, freeze_folded_batchnorm, load_checkpoint,
-                                                 seed_all)
+                                                 seed_all, start_run)
 
     if args.steps < 1 or args.batch < 2:
         raise SpaceposeError("--steps must be >= 1 and --batch >= 2")
-    torch.set_num_threads(max(1, args.threads))
-    out: Path = args.out
-    ckpt_path = out / "last.pt"
-    if ckpt_path.exists() and not args.resume:
-        raise SpaceposeError(f"{ckpt_path} exists: pass --resume to continue it, or choose another --out")
-    if args.resume and not ckpt_path.exists():
-        raise SpaceposeError(f"--resume given but {ckpt_path} does not exist")
-    out.mkdir(parents=True, exist_ok=True)
+    ctx = start_run(args.out, resume=args.resume, threads=max(1, args.threads))
+    out, ckpt_path = ctx.out, ctx.ckpt_path
     bundle = load_bundle(args.bundle, verify_graphs=False)
     if len(bundle.silhouette_points) < 100:
         raise SpaceposeError("the bundle has no silhouette samples to draw outlines with")

@@ -142,18 +142,12 @@ def run(args: argparse.Namespace) -> int:
     from spacepose.errors import SpaceposeError
     from spacepose.models.outline_refiner import OutlineRefinerConfig, OutlineRefinerNet
     from spacepose.tools.outline_data import load_outline_samples
-    from spacepose.tools.training_common import JsonlLog, atomic_save, load_checkpoint, seed_all
+    from spacepose.tools.training_common import JsonlLog, atomic_save, load_checkpoint, seed_all, start_run
 
     if args.steps < 1 or args.batch < 1 or args.crop < 16 or args.crop % 4:
         raise SpaceposeError("--steps and --batch must be >= 1 and --crop a multiple of 4, >= 16")
-    torch.set_num_threads(max(1, args.threads))
-    out: Path = args.out
-    ckpt_path = out / "last.pt"
-    if ckpt_path.exists() and not args.resume:
-        raise SpaceposeError(f"{ckpt_path} exists: pass --resume to continue it, or choose another --out")
-    if args.resume and not ckpt_path.exists():
-        raise SpaceposeError(f"--resume given but {ckpt_path} does not exist")
-    out.mkdir(parents=True, exist_ok=True)
+    ctx = start_run(args.out, resume=args.resume, threads=max(1, args.threads))
+    out, ckpt_path = ctx.out, ctx.ckpt_path
     train, val = load_outline_samples(args.data), load_outline_samples(args.val)
     config = OutlineRefinerConfig(width=args.width)
     seed_all(args.seed)

@@ -3,8 +3,8 @@
     python reports/outline_s41/replay.py DATASET CKPT --split train --skip 0 --limit 600 --out ROWS.json.gz
     python reports/outline_s41/replay.py --table ROWS.json.gz...
 
-Runs the shipped pipeline (use_prior off, as ``eval-pose``); on every frame whose reported pose is valid and
-polished, the polish (:func:`spacepose.silhouette.polish_pose`, its own caps) is recomputed from the decided pose
+Runs the shipped pipeline without its outline refiner (session 39's; use_prior off, as ``eval-pose``); on every
+frame whose reported pose is valid and polished, the polish (:func:`spacepose.silhouette.polish_pose`, its own caps) is recomputed from the decided pose
 against the refined outline (``refined``) and against the rendered mask (``truemask``, the bound), next to the
 shipped one (``base``). Rows: per frame the errors of each form and the outlines' IoU against the mask.
 ``--table`` prints mean / median e_t and e_R and the count within 0.10 m and 2 deg per form.
@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "polish_s40"))
 import refiner as rf  # noqa: E402
+from explore import _iou  # noqa: E402  (session 40's)
 
 FORMS = ("base", "refined", "refined_w0.5", "refined_w1", "hybrid", "truemask")
 
@@ -35,8 +37,11 @@ def run(dataset: str, ckpt: str, split: str, skip: int, limit: int, out: str) ->
     from spacepose.metrics import rotation_error_deg
     from spacepose.tools.pose_data import read_pose_labels
 
+    from spacepose.outline_refiner import refined_outline, refiner_planes
+    from spacepose.tools.train_outline import GROW, frame_logits
+
     net = rf._load_net(ckpt)
-    model = load_bundle(None)
+    model = dataclasses.replace(load_bundle(None), outline_refiner=None)   # the pipeline as before session 41
     root = Path(dataset)
     records = read_pose_labels(root, split)[skip: skip + limit]
     estimator = est_mod.PoseEstimator(load_rig(root / "rig.yaml"), bundle=model, threads=1, use_prior=False)
@@ -56,9 +61,8 @@ def run(dataset: str, ckpt: str, split: str, skip: int, limit: int, out: str) ->
         fr = decision.frame
         n = fr.size
         grey = window_grey(state["left"], fr.x0, fr.y0, fr.side, n)
-        data = {"grey": grey[None], "observed": decision.observed[None], "disp": state["disp"][None],
-                "size": np.array([n])}
-        refined = rf.refine(rf.predict(net, data, 0), decision.observed)
+        logit = frame_logits(net, refiner_planes(grey, decision.observed, state["disp"]))
+        refined = refined_outline(logit, decision.observed, GROW)
         truth = (crop_to_frame(state["mask"], fr.x0, fr.y0, fr.side, n,
                                convert=lambda box: (box > 127).astype(np.float32)) > 0.5).astype(np.uint8)
         forms = {"base": shipped}
@@ -75,7 +79,7 @@ def run(dataset: str, ckpt: str, split: str, skip: int, limit: int, out: str) ->
         else:
             forms["hybrid"] = None
         state["forms"] = forms
-        state["iou"] = {"stereo": rf.iou(decision.observed, truth), "refined": rf.iou(refined, truth)}
+        state["iou"] = {"stereo": _iou(decision.observed, truth), "refined": _iou(refined, truth)}
         return shipped
 
     est_mod.decide_outline, est_mod.polish_pose = decide, polish

@@ -101,7 +101,7 @@ def run(dataset: str, split: str, skip: int, limit: int, out: str, frames_from: 
         keep = {r["frame"] for r in json.load(gzip.open(frames_from, "rt"))["rows"] if r["polished"]}
         records = [r for r in records if r.frame in keep]
     truth: dict = {}
-    model = load_bundle(None)
+    model = dataclasses.replace(load_bundle(None), outline_refiner=None)   # the pipeline of session 40 (39's bundle)
     estimator = est_mod.PoseEstimator(load_rig(root / "rig.yaml"), bundle=model, threads=1, use_prior=False)
     calls: list[dict] = []
     original = sil_mod.polish_pose
