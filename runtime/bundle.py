@@ -51,6 +51,9 @@ A bundle is a folder::
       "outline_refiner": {"file": "outline.onnx", "grow_px": 2},   # optional, needs the
                                        # silhouette's polish: a graph that sharpens the stereo outline
                                        # the polish reads (spacepose.outline_refiner)
+      "range_fit": {"window_px": 7, "span_px": 1.0, "step_px": 0.1},   # optional, needs
+                                       # target.surface_points: a valid pose's range measured again
+                                       # from the images at full resolution (spacepose.range_fit)
       "uncertainty": {"range_k": 0.3, "lateral_px": 0.5, "lateral_floor_m": 0.02,
                       "rotation_k_deg": 20.0, "rotation_floor_deg": 0.0,
                       "rotation_chamfer_deg": 1.5},   # optional, needs
@@ -97,6 +100,7 @@ from .confidence import ConfidenceConfig, parse_confidence
 from .errors import BundleError
 from .flip_classifier import FlipClassifierConfig, parse_flip_classifier
 from .outline_refiner import OutlineRefinerConfig, parse_outline_refiner
+from .range_fit import RangeFitConfig, parse_range_fit
 from .uncertainty import PositionUncertaintyConfig, UncertaintyConfig, parse_position_uncertainty, parse_uncertainty
 from .pose_inputs import PoseInputSpec
 from .registration import RegistrationConfig
@@ -236,6 +240,8 @@ class ModelBundle:
             when the bundle has none.
         outline_refiner: the optional outline graph's section (:mod:`spacepose.outline_refiner`: the polish
             reads its refined outline), ``None`` when the bundle has none.
+        range_fit: the optional range fit (:mod:`spacepose.range_fit`: a valid pose's range from the images at
+            full resolution), ``None`` when the bundle has none.
         uncertainty: the optional per-frame uncertainty model (:mod:`spacepose.uncertainty`), ``None``
             when the bundle has none (no covariance is then reported).
         position_uncertainty: the optional covariance model of a position reported without a pose
@@ -273,6 +279,7 @@ class ModelBundle:
     silhouette: SilhouetteConfig | None = None
     flip_classifier: FlipClassifierConfig | None = None
     outline_refiner: OutlineRefinerConfig | None = None
+    range_fit: RangeFitConfig | None = None
     uncertainty: UncertaintyConfig | None = None
     position_uncertainty: PositionUncertaintyConfig | None = None
     confidence: ConfidenceConfig | None = None
@@ -683,6 +690,7 @@ def _parse_manifest(data: Any, path: Path) -> ModelBundle:
         silhouette=_parse_silhouette(data.get("silhouette"), len(outline), data.get("registration") is not None),
         flip_classifier=_parse_flip(data),
         outline_refiner=_parse_outline_refiner(data),
+        range_fit=_parse_range_fit(data, len(surface)),
         uncertainty=_parse_uncertainty(data, "uncertainty", parse_uncertainty),
         position_uncertainty=_parse_uncertainty(data, "position_uncertainty", parse_position_uncertainty),
         confidence=_parse_confidence(data),
@@ -693,6 +701,14 @@ def _parse_flip(data: Mapping[str, Any]) -> FlipClassifierConfig | None:
     config = parse_flip_classifier(data.get("flip_classifier"))
     if config is not None and data.get("silhouette") is None:
         raise BundleError("bundle.json: flip_classifier needs a silhouette section (it judges the outline's winner)")
+    return config
+
+
+def _parse_range_fit(data: Mapping[str, Any], n_surface: int) -> RangeFitConfig | None:
+    config = parse_range_fit(data.get("range_fit"))
+    if config is not None and n_surface < config.min_samples:
+        raise BundleError(f"bundle.json: range_fit needs at least min_samples ({config.min_samples}) surface points, "
+                          f"the target has {n_surface}")
     return config
 
 

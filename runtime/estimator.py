@@ -50,6 +50,7 @@ from .flip import flipped_pose, resolve_flip
 from .flip_classifier import FlipClassifier
 from .image_vote import crop_to_frame, window_grey
 from .outline_refiner import OutlineRefiner, refined_outline, refiner_planes
+from .range_fit import fit_range
 from .outline_search import OutlineTemplates
 from .photometric import photometric_consistency
 from .pose_preprocess import depth_window, pose_crop_window, prepare_pose_inputs
@@ -171,6 +172,9 @@ class PoseResult:
         polish_deg, polish_m: how far the silhouette stage's polish (``polish`` of the bundle's
             ``silhouette`` section, :func:`spacepose.silhouette.polish_pose`) moved the decided pose; NaN
             when it did not run or was not used. Not part of the JSON line.
+        range_fit_m: with the bundle's ``range_fit`` (:mod:`spacepose.range_fit`), how far the fit moved a valid
+            pose's centre along its line of sight (m, positive: farther); NaN when it did not run or was not
+            applied. Not part of the JSON line.
         flip_prob: with the bundle's ``flip_classifier``, the probability the classifier gives the outline
             stage's winner against its 180° flip (:mod:`spacepose.flip_classifier`); NaN when it did not
             run. Not part of the JSON line.
@@ -205,6 +209,7 @@ class PoseResult:
     polish_deg: float = float("nan")
     polish_m: float = float("nan")
     flip_prob: float = float("nan")
+    range_fit_m: float = float("nan")
     decided: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     decided_by: str = ""
     position: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
@@ -425,6 +430,7 @@ class PoseEstimator:
                 raise BundleError(f"pose graph has no output {name!r} (outputs: {self._pose_outputs})")
         self._spec = self.bundle.pose.input_spec
         surface = np.asarray(self.bundle.surface_points)
+        self._surface = np.asarray(surface, dtype=np.float64).reshape(-1, 3)   # the range fit's samples
         wants_normals = (self.refine or self.bundle.registration is not None) and len(surface)
         self._surface_normals = ((np.asarray(self.bundle.surface_normals) if len(self.bundle.surface_normals)
                                   else _surface_normals(surface)) if wants_normals else None)
@@ -557,7 +563,8 @@ class PoseEstimator:
                             outline_image_background=factor("outline_image_background"),
                             outline_image_pixels=factor("outline_image_pixels"),
                             polish_deg=factor("polish_deg"), polish_m=factor("polish_m"),
-                            flip_prob=factor("flip_prob"), decided=stage.decided if valid else None,
+                            flip_prob=factor("flip_prob"), range_fit_m=factor("range_fit_m") if valid else math.nan,
+                            decided=stage.decided if valid else None,
                             decided_by=_route_name(factors) if valid else "",
                             position=position, position_valid=position_valid)
         if valid and self.bundle.uncertainty is not None:
@@ -1123,4 +1130,23 @@ class PoseEstimator:
             problem = self._verify(stage, xyz, left_r, right_r, timer, None)
         if problem is not None:
             return problem[0], None, stereo.window, problem[1]
+        if stage.valid and bundle.range_fit is not None and len(bundle.surface_points):
+            stage = self._range_fit(stage, left_r, right_r, stereo.disparity, timer)
         return stage.status, stage, stereo.window, "" if stage.valid else f"pose stage: {stage.status}"
+
+    def _range_fit(self, stage: PoseStageResult, left_r: np.ndarray, right_r: np.ndarray, disparity: np.ndarray,
+                   timer: StageTimer) -> PoseStageResult:
+        """The valid, checked pose moved along its centre's line of sight to the range the images show at full
+        resolution (:mod:`spacepose.range_fit`, the bundle's ``range_fit``); unchanged when the fit is not
+        applied. Everything decided before (validity, route, polish caps) stands. Factors: ``range_fit_m`` (the
+        move, NaN without a fit) and ``range_fit_samples``."""
+        bundle = self.bundle
+        with timer.stage("range_fit"):
+            fit = fit_range(stage.R, stage.t, np.asarray(bundle.centre), self._surface, left_r, right_r, disparity,
+                            self.K, self.baseline_m, bundle.range_fit)
+        factors = {**stage.factors, "range_fit_m": fit.move_m if fit.t is not None else math.nan,
+                   "range_fit_samples": float(fit.samples)}
+        if fit.t is None:
+            logger.info("range fit not applied: %s", fit.why)
+            return dataclasses.replace(stage, factors=factors)
+        return dataclasses.replace(stage, t=fit.t, factors=factors)

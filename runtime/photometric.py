@@ -26,7 +26,7 @@ import numpy as np
 
 from spacepose.errors import check_shape
 
-__all__ = ["PhotoConsistency", "photometric_consistency", "to_grey_float"]
+__all__ = ["PhotoConsistency", "photometric_consistency", "to_grey_float", "visible_mask"]
 
 
 @dataclass(frozen=True)
@@ -52,8 +52,9 @@ def to_grey_float(image: np.ndarray) -> np.ndarray:
     return grey / scale
 
 
-def _visible(uv: np.ndarray, z: np.ndarray, cell_px: float, depth_tol: float) -> np.ndarray:
-    """Boolean mask of points within ``depth_tol`` of the nearest point in their ``cell_px`` cell."""
+def visible_mask(uv: np.ndarray, z: np.ndarray, cell_px: float, depth_tol: float) -> np.ndarray:
+    """(N,) boolean mask of the points ``uv`` (N, 2, pixels) at depths ``z`` (N,) within ``depth_tol`` of the
+    nearest point in their ``cell_px`` cell (a coarse z-buffer)."""
     cells = np.floor(uv / cell_px).astype(np.int64)
     key = cells[:, 0] * 1_000_003 + cells[:, 1]
     order = np.lexsort((z, key))
@@ -114,7 +115,7 @@ def photometric_consistency(R: np.ndarray, t: np.ndarray, surface: np.ndarray, l
     extent = float(np.ptp(np.asarray(surface, np.float64), axis=0).max())
     tol = 0.05 * extent if depth_tol_m is None else float(depth_tol_m)
     cell = max(2.0 * radius + 1.0, 1.0)
-    vis = _visible(np.stack([u, v], axis=1), z, cell, tol)
+    vis = visible_mask(np.stack([u, v], axis=1), z, cell, tol)
     u, v, d = u[vis], v[vis], d[vis]
     offsets = np.arange(-radius, radius + 1, dtype=np.float32)
     dx, dy = np.meshgrid(offsets, offsets)

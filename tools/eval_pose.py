@@ -277,6 +277,7 @@ def evaluate_pose(dataset: str | Path, bundle: str | Path | None = None, *, limi
                "outline_image_background": float(result.outline_image_background),
                "outline_image_pixels": float(result.outline_image_pixels),
                "polish_deg": float(result.polish_deg), "polish_m": float(result.polish_m),
+               "range_fit_m": float(result.range_fit_m),
                "flip_prob": float(result.flip_prob), "decided_by": result.decided_by,
                "position_valid": bool(result.position_valid), "e_pos": e_pos, "e_pos_los": e_pos_los,
                "position": np.asarray(result.position).tolist(),

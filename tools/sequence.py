@@ -135,6 +135,7 @@ def evaluate_sequence(folder: str | Path, bundle: str | Path | None = None, thre
                "outline_chamfer_px": float(res.outline_chamfer_px), "outline_margin_px": float(res.outline_margin_px),
                "outline_image_score": float(res.outline_image_score), "decided_by": res.decided_by,
                "polish_deg": float(res.polish_deg), "polish_m": float(res.polish_m),
+               "range_fit_m": float(res.range_fit_m),
                "position_valid": bool(res.position_valid), "stereo_ms": float(res.timings_ms.get("stereo", float("nan"))),
                "roi": None if res.roi is None else [int(v) for v in res.roi],
                "depth_tolerance_m": float(res.depth_tolerance_m), "position": np.asarray(res.position).tolist(),
