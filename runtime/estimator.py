@@ -11,8 +11,10 @@ The flow of one frame (DESIGN.md), each step a named stage timed in ``PoseResult
     ICP against the stereo points; off by default)] -> verify (without registration, with the
     bundle's ``voting.flip_axis``: the pose or its 180° flip, whichever the stereo points support,
     both refined when refine is on, spacepose.flip; surface fitness against the stereo points;
-    left-right photometric consistency, spacepose.photometric). The checks judge the pose that is
-    reported, refined or not.
+    left-right photometric consistency, spacepose.photometric) [-> range_fit (with the bundle's
+    ``range_fit``: the checked pose moved along its centre's line of sight to the range the images show
+    at full resolution, spacepose.range_fit)]. The checks judge the pose that is reported, refined or
+    not, before the range fit, which changes only its range.
 
 Input rule (one rule, no exceptions): an argument that is not a numpy array is a programming error
 and raises :class:`~spacepose.errors.ShapeError`; every numpy array the estimator cannot use — wrong
