@@ -175,8 +175,8 @@ class PoseResult:
             ``silhouette`` section, :func:`spacepose.silhouette.polish_pose`) moved the decided pose; NaN
             when it did not run or was not used. Not part of the JSON line.
         range_fit_m: with the bundle's ``range_fit`` (:mod:`spacepose.range_fit`), how far the fit moved a valid
-            pose's centre along its line of sight (m, positive: farther); NaN when it did not run or was not
-            applied. Not part of the JSON line.
+            pose's centre along its line of sight (m, positive: farther), or, with its ``positions``, the position
+            of a frame without a pose; NaN when it did not run or was not applied. Not part of the JSON line.
         flip_prob: with the bundle's ``flip_classifier``, the probability the classifier gives the outline
             stage's winner against its 180° flip (:mod:`spacepose.flip_classifier`); NaN when it did not
             run. Not part of the JSON line.
@@ -565,7 +565,9 @@ class PoseEstimator:
                             outline_image_background=factor("outline_image_background"),
                             outline_image_pixels=factor("outline_image_pixels"),
                             polish_deg=factor("polish_deg"), polish_m=factor("polish_m"),
-                            flip_prob=factor("flip_prob"), range_fit_m=factor("range_fit_m") if valid else math.nan,
+                            flip_prob=factor("flip_prob"), range_fit_m=(factor("range_fit_m") if valid else
+                                                                 factor("position_range_fit_m") if position_valid
+                                                                 else math.nan),
                             decided=stage.decided if valid else None,
                             decided_by=_route_name(factors) if valid else "",
                             position=position, position_valid=position_valid)
@@ -745,6 +747,7 @@ class PoseEstimator:
             position = range_debiased(R_c @ bundle.centre + t_c, reg.tau_m, config.position_range_bias_outline
                                       if fits else config.position_range_bias_registered)
             factors.update(zip(_POSITION_KEYS, (float(v) for v in position)))
+            stage = dataclasses.replace(stage, position_pose=(R_c, position - R_c @ np.asarray(bundle.centre)))
         flip_p, flip_input = self._flip_probability(outline, stereo, left_r, timer)
         if flip_p is not None:
             factors["flip_prob"] = flip_p
@@ -1100,6 +1103,9 @@ class PoseEstimator:
         if self._registration is not None:
             stage, detail = self._register(xyz, stage, stereo, timer, left_r)  # times "registration", "silhouette"
             if not stage.valid:  # the invalid stage still carries its diagnostics (flip_margin)
+                if (stage.position_pose is not None and bundle.range_fit is not None and bundle.range_fit.positions
+                        and all(key in stage.factors for key in _POSITION_KEYS)):
+                    stage = self._position_range_fit(stage, left_r, right_r, stereo.disparity, timer)
                 return stage.status, stage, stereo.window, detail
         refine = None
         if stage.valid and self.refine and self._surface_normals is not None:
@@ -1152,3 +1158,22 @@ class PoseEstimator:
             logger.info("range fit not applied: %s", fit.why)
             return dataclasses.replace(stage, factors=factors)
         return dataclasses.replace(stage, t=fit.t, factors=factors)
+
+    def _position_range_fit(self, stage: PoseStageResult, left_r: np.ndarray, right_r: np.ndarray,
+                            disparity: np.ndarray, timer: StageTimer) -> PoseStageResult:
+        """The position of a frame without a pose (its factors) moved along its line of sight to the range the
+        images show, read with the rotation of ``stage.position_pose`` (the outline's winner or the registered
+        pose: a pose and its flip put the centre at the same place) — the bundle's ``range_fit`` with
+        ``positions`` 1. Unchanged when the fit is not applied. Factor ``position_range_fit_m``: the move (NaN
+        without a fit)."""
+        bundle = self.bundle
+        R_c, t_c = stage.position_pose
+        with timer.stage("range_fit"):
+            fit = fit_range(R_c, t_c, np.asarray(bundle.centre), self._surface, left_r, right_r, disparity,
+                            self.K, self.baseline_m, bundle.range_fit)
+        factors = {**stage.factors, "position_range_fit_m": fit.move_m if fit.t is not None else math.nan}
+        if fit.t is None:
+            logger.info("range fit of the position not applied: %s", fit.why)
+        else:
+            factors.update(zip(_POSITION_KEYS, (float(v) for v in R_c @ np.asarray(bundle.centre) + fit.t)))
+        return dataclasses.replace(stage, factors=factors)

@@ -85,6 +85,9 @@ class PoseStageResult:
             pose refined against the outline falls back to the registered one), else ``None``.
         decided: ``(R, t)`` as decided, before the silhouette stage's polish moved it (the pose the
             next frame's tracking compares with, as its gates were set on), else ``None`` (``R, t``).
+        position_pose: ``(R, t)`` whose centre is the estimator's position without a pose (the factors
+            ``position_x`` .. ``position_z``; the outline's winner or the registered pose, moved as the position
+            route moves it), else ``None``; the range fit of such a position reads its rotation.
     """
 
     R: np.ndarray
@@ -102,6 +105,7 @@ class PoseStageResult:
     factors: dict[str, float] = field(default_factory=dict)
     fallback: tuple[np.ndarray, np.ndarray] | None = None
     decided: tuple[np.ndarray, np.ndarray] | None = None
+    position_pose: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def depth_sigma(depth_m: float, focal_px: float, baseline_m: float, sigma_d_px: float) -> float:

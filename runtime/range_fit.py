@@ -20,7 +20,8 @@ This module measures the range again from the images. With the bundle's optional
    the background and the outline's edge among them, are left out).
 
 The rotation and the centre's pixel do not change, and neither does anything decided before (the route, the
-gates, the polish caps). A fit on fewer than ``min_samples`` samples, or one that would move the centre more than
+gates, the polish caps). With ``positions`` 1, a frame that reports the target's position without a pose (the flip
+undecided) has that position fitted the same way, read with the rotation of the pose it came from. A fit on fewer than ``min_samples`` samples, or one that would move the centre more than
 ``max_move_m``, is not applied: the polished pose is reported as before (:class:`RangeFit` says why).
 """
 
@@ -48,7 +49,10 @@ class RangeFitConfig:
     offsets searched around the stereo disparity. cell_px, depth_tol_m: the z-buffer's cell and depth tolerance
     for the visible surface samples. max_residual_px: samples farther than this from the model's disparity are left
     out. min_samples: least samples for a fit. steps: fixed-point steps of the range. max_move_m: a fit that moves
-    the target's centre farther than this is not applied.
+    the target's centre farther than this is not applied. positions: 1 fits the range of a position reported
+    without a pose too (``PoseResult.position_valid`` without ``valid``), read with the rotation of the pose the
+    position came from (the outline's winner or the registered pose; its flip puts the centre at the same place);
+    0 (the default) leaves those positions as the position route makes them.
     """
 
     window_px: int = 7
@@ -60,6 +64,7 @@ class RangeFitConfig:
     min_samples: int = 30
     steps: int = 2
     max_move_m: float = 1.0
+    positions: int = 0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.window_px, int) and self.window_px >= 1 and self.window_px % 2 == 1
@@ -73,6 +78,8 @@ class RangeFitConfig:
             raise ValueError("range_fit: cell_px, depth_tol_m, max_residual_px and max_move_m must be positive")
         if not (isinstance(self.min_samples, int) and self.min_samples >= 3):
             raise ValueError(f"range_fit.min_samples must be an integer >= 3, got {self.min_samples!r}")
+        if self.positions not in (0, 1) or isinstance(self.positions, bool):
+            raise ValueError(f"range_fit.positions must be 0 or 1, got {self.positions!r}")
         if not (isinstance(self.steps, int) and 1 <= self.steps <= 10):
             raise ValueError(f"range_fit.steps must be an integer in [1, 10], got {self.steps!r}")
 

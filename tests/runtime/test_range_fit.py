@@ -239,3 +239,50 @@ def test_the_range_fit_runs_on_a_real_frame_of_the_tiny_bundle(tmp_path):
 def test_the_shipped_bundle_fits_the_range():
     """reports/range_s42/plan.txt (met in session 42): the range fit with RangeFitConfig's defaults."""
     assert load_bundle(None, verify_graphs=False).range_fit == RangeFitConfig()
+
+
+def test_the_section_s_positions_switch():
+    assert RangeFitConfig().positions == 0 and parse_range_fit({"positions": 1}).positions == 1
+    for bad in (2, True, 0.5):
+        with pytest.raises(BundleError, match="positions"):
+            parse_range_fit({"positions": bad})
+
+
+@pytest.mark.parametrize("positions", [0, 1])
+def test_a_position_without_a_pose_gets_the_fit_only_with_positions(tmp_path, monkeypatch, positions):
+    """test_registration's ambiguous plate: the frame is weak_votes with a position. With ``positions`` 1 the fit
+    reads the rotation the position came from and moves the position; with 0 (the default) it does not run."""
+    import spacepose.estimator as estimator_module
+    from _bundle_fixtures import synthetic_pair
+    from test_registration import _registration_bundle
+
+    from spacepose.calibration.rig import paper_rig
+    from spacepose.estimator import PoseEstimator
+
+    left, right = synthetic_pair()
+    plain = _registration_bundle(tmp_path / "plain", {"min_margin": 0.5, "position_max_tau_m": 1.0})
+    folder = _registration_bundle(tmp_path / "fit", {"min_margin": 0.5, "position_max_tau_m": 1.0})
+    data = json.loads((folder / "bundle.json").read_text())
+    data["range_fit"] = {"positions": positions, "min_samples": 3}
+    (folder / "bundle.json").write_text(json.dumps(data))
+    base = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(plain), threads=1).estimate(left, right)
+    assert base.status == "weak_votes" and base.position_valid and math.isnan(base.range_fit_m)
+    calls = []
+
+    def fake_fit(R, t, centre, surface, left_r, right_r, disparity, K_, baseline, config):
+        calls.append((R, t, centre))
+        return RangeFit(np.asarray(t) + [0.0, 0.0, 0.25], 0.25, 50, -0.1)
+
+    monkeypatch.setattr(estimator_module, "fit_range", fake_fit)
+    est = PoseEstimator(paper_rig(640, 480), bundle=load_bundle(folder), threads=1)
+    res = est.estimate(left, right)
+    assert res.status == "weak_votes" and not res.valid and res.position_valid
+    if not positions:
+        assert not calls and math.isnan(res.range_fit_m)
+        np.testing.assert_allclose(res.position, base.position)
+        return
+    assert len(calls) == 1 and "range_fit" in res.timings_ms
+    R_c, t_c, centre = calls[0]
+    np.testing.assert_allclose(R_c @ centre + t_c, base.position, atol=1e-9)   # it starts at the route's position
+    np.testing.assert_allclose(res.position, base.position + [0.0, 0.0, 0.25], atol=1e-9)
+    assert res.range_fit_m == 0.25 and np.all(np.isnan(res.t))                  # still no pose
