@@ -237,8 +237,9 @@ def test_the_range_fit_runs_on_a_real_frame_of_the_tiny_bundle(tmp_path):
 
 
 def test_the_shipped_bundle_fits_the_range():
-    """reports/range_s42/plan.txt (met in session 42): the range fit with RangeFitConfig's defaults."""
-    assert load_bundle(None, verify_graphs=False).range_fit == RangeFitConfig()
+    """reports/range_s42/plan.txt (met in session 42): the range fit with RangeFitConfig's defaults; plan3.txt's
+    part B (met): for positions without a pose too."""
+    assert load_bundle(None, verify_graphs=False).range_fit == RangeFitConfig(positions=1)
 
 
 def test_the_section_s_positions_switch():
