@@ -3,11 +3,10 @@
 The stereo graph runs on a 256x256 crop, and its disparity over the target carries a per-frame bias: on spent
 frames (``reports/range_s42``) the median error over the target's interior had a spread of 0.26 px at 640x480,
 which is 0.1 m of range at 30 m. The range of a valid pose followed it: the polish weighs the stereo points' range
-against the outline's, and neither removes that bias. With the rendered disparity instead, the same range fit left
-0.03 m.
+against the outline's, and neither removes that bias. Step 2 below alone, on the rendered disparity, leaves 0.03 m.
 
 This module measures the range again from the images. With the bundle's optional ``range_fit`` section
-(:class:`RangeFitConfig`), the estimator does, after the polish of a valid pose:
+(:class:`RangeFitConfig`), the estimator does, after every check of a valid pose:
 
 1. the disparity refined at full resolution over the box the target's surface samples cover at the pose
    (:func:`refine_disparity`): per pixel where the stereo disparity is positive, the offset in
@@ -21,8 +20,12 @@ This module measures the range again from the images. With the bundle's optional
 
 The rotation and the centre's pixel do not change, and neither does anything decided before (the route, the
 gates, the polish caps). With ``positions`` 1, a frame that reports the target's position without a pose (the flip
-undecided) has that position fitted the same way, read with the rotation of the pose it came from. A fit on fewer than ``min_samples`` samples, or one that would move the centre more than
-``max_move_m``, is not applied: the polished pose is reported as before (:class:`RangeFit` says why).
+undecided) has that position fitted the same way, read with the rotation of the pose it came from. A fit on fewer
+than ``min_samples`` samples, or one that would move the centre more than ``max_move_m``, is not applied: the pose
+or position is reported as before (:class:`RangeFit` says why).
+
+Measured (session 42, rules written before their fresh frames): valid poses' mean range error 0.121 -> 0.076 m
+(``reports/range_s42/plan.txt``); positions without a pose 0.200 -> 0.163 m (``plan3.txt``, part B).
 """
 
 from __future__ import annotations
