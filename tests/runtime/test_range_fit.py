@@ -287,3 +287,13 @@ def test_a_position_without_a_pose_gets_the_fit_only_with_positions(tmp_path, mo
     np.testing.assert_allclose(R_c @ centre + t_c, base.position, atol=1e-9)   # it starts at the route's position
     np.testing.assert_allclose(res.position, base.position + [0.0, 0.0, 0.25], atol=1e-9)
     assert res.range_fit_m == 0.25 and np.all(np.isnan(res.t))                  # still no pose
+
+
+def test_the_shipped_position_covariance_is_plan4_s_fit():
+    """reports/range_s42/plan4.txt (met in session 42): position_uncertainty fitted again after the positions' fit."""
+    from spacepose.uncertainty import PositionUncertaintyConfig
+
+    fit = json.loads((Path(__file__).resolve().parents[2] / "reports" / "range_s42" / "fit4_positions.json")
+                     .read_text())["fit"]
+    want = PositionUncertaintyConfig(**{k: round(float(v), 4) for k, v in fit.items()})
+    assert load_bundle(None, verify_graphs=False).position_uncertainty == want
