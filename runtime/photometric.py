@@ -26,7 +26,7 @@ import numpy as np
 
 from spacepose.errors import check_shape
 
-__all__ = ["PhotoConsistency", "photometric_consistency", "to_grey_float", "visible_mask"]
+__all__ = ["PhotoConsistency", "photometric_consistency", "project_surface", "to_grey_float", "visible_mask"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,19 @@ def to_grey_float(image: np.ndarray) -> np.ndarray:
     if grey.ndim == 3:
         grey = cv2.cvtColor(np.ascontiguousarray(grey), cv2.COLOR_RGB2GRAY) if grey.shape[2] == 3 else grey[..., 0]
     return grey / scale
+
+
+def project_surface(R: np.ndarray, t: np.ndarray, surface: np.ndarray, K: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(u, v, z)``, each (M,) float64: the object-frame samples ``surface`` (S, 3) at the pose ``(R, t)`` (object ->
+    camera), those in front of the camera (z > 1e-6 m), projected with the intrinsics ``K`` (3, 3)."""
+    pts = np.asarray(surface, np.float64) @ np.asarray(R, np.float64).T + np.asarray(t, np.float64)
+    z = pts[:, 2]
+    front = z > 1e-6
+    pts, z = pts[front], z[front]
+    u = float(K[0, 0]) * pts[:, 0] / z + K[0, 2]
+    v = float(K[1, 1]) * pts[:, 1] / z + K[1, 2]
+    return u, v, z
 
 
 def visible_mask(uv: np.ndarray, z: np.ndarray, cell_px: float, depth_tol: float) -> np.ndarray:
@@ -97,15 +110,10 @@ def photometric_consistency(R: np.ndarray, t: np.ndarray, surface: np.ndarray, l
     h, w = left.shape[:2]
     if len(surface) == 0 or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
         return PhotoConsistency(None, 0, 0)
-    pts = np.asarray(surface, np.float64) @ np.asarray(R, np.float64).T + np.asarray(t, np.float64)
-    z = pts[:, 2]
-    front = z > 1e-6
-    pts, z = pts[front], z[front]
+    u, v, z = project_surface(R, t, surface, K)
     if len(z) == 0:
         return PhotoConsistency(None, 0, 0)
     f = float(K[0, 0])
-    u = f * pts[:, 0] / z + K[0, 2]
-    v = float(K[1, 1]) * pts[:, 1] / z + K[1, 2]
     d = f * float(baseline_m) / z
     margin = radius + 1
     inside = (u - d >= margin) & (u < w - margin) & (v >= margin) & (v < h - margin)

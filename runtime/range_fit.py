@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 
 from .errors import BundleError, check_shape
-from .photometric import to_grey_float, visible_mask
+from .photometric import project_surface, to_grey_float, visible_mask
 
 __all__ = ["RangeFitConfig", "RangeFit", "parse_range_fit", "refine_disparity", "visible_samples", "fit_range"]
 
@@ -140,12 +140,7 @@ def visible_samples(R: np.ndarray, t: np.ndarray, surface: np.ndarray, K: np.nda
     """``(u, v, z)``, each (M,): the surface samples (S, 3, object frame) at the pose ``(R, t)`` that fall inside the
     image ``image_size`` = (W, H) in front of the camera and are nearest in their ``cell_px`` z-buffer cell (within
     ``depth_tol_m``)."""
-    pts = np.asarray(surface, np.float64) @ np.asarray(R, np.float64).T + np.asarray(t, np.float64)
-    z = pts[:, 2]
-    front = z > 1e-6
-    pts, z = pts[front], z[front]
-    u = K[0, 0] * pts[:, 0] / z + K[0, 2]
-    v = K[1, 1] * pts[:, 1] / z + K[1, 2]
+    u, v, z = project_surface(R, t, surface, K)
     w, h = image_size
     inside = (u >= 0.0) & (u <= w - 1.0) & (v >= 0.0) & (v <= h - 1.0)
     u, v, z = u[inside], v[inside], z[inside]
