@@ -195,10 +195,13 @@ def refine_disparity(left_grey: np.ndarray, right_grey: np.ndarray, disparity: n
     return np.where(d > 0.0, d + shift, 0.0).astype(np.float32)
 
 
-def _sample(values: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Bilinear samples of (h, w) ``values`` at (u, v) (within its bounds)."""
-    return cv2.remap(values, u.astype(np.float32)[None], v.astype(np.float32)[None], cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_REPLICATE)[0].astype(np.float64)
+def _sample(values: np.ndarray, u: np.ndarray, v: np.ndarray, x0: int, y0: int) -> np.ndarray:
+    """Bilinear samples at the image pixels (u, v) of (h, w) ``values`` whose first pixel is the image's (x0, y0); 0
+    beyond its bounds. The pixels go to float32 before the shift, which is then exact."""
+    mx = u.astype(np.float32) - np.float32(x0)
+    my = v.astype(np.float32) - np.float32(y0)
+    return cv2.remap(values, mx[None], my[None], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                     borderValue=0.0)[0].astype(np.float64)
 
 
 def fit_range(R: np.ndarray, t: np.ndarray, centre: np.ndarray, surface: np.ndarray, left: np.ndarray,
@@ -234,13 +237,11 @@ def fit_range(R: np.ndarray, t: np.ndarray, centre: np.ndarray, surface: np.ndar
     pad = config.window_px // 2 + 2
     x0, y0 = max(int(math.floor(u.min())) - pad, 0), max(int(math.floor(v.min())) - pad, 0)
     x1, y1 = min(int(math.ceil(u.max())) + pad + 1, w), min(int(math.ceil(v.max())) + pad + 1, h)
-    band = slice(y0, y1)   # the grey images are needed on the box's rows only
-    lg = np.zeros((h, w), np.float32)
-    rg = np.zeros((h, w), np.float32)
-    lg[band] = to_grey_float(np.asarray(left)[band])
-    rg[band] = to_grey_float(np.asarray(right)[band])
-    refined = np.zeros((h, w), np.float32)
-    refined[y0:y1, x0:x1] = refine_disparity(lg, rg, np.asarray(disparity, np.float32), (x0, y0, x1, y1), config)
+    # the matching reads the box's rows only (the right image's whole width): grey images and disparity of those
+    # rows, the refined disparity of the box alone, sampled in box coordinates with 0 outside it
+    band = slice(y0, y1)
+    refined = refine_disparity(to_grey_float(np.asarray(left)[band]), to_grey_float(np.asarray(right)[band]),
+                               np.asarray(disparity, np.float32)[band], (x0, 0, x1, y1 - y0), config)
     c = R @ centre + t
     c0 = c.copy()
     first = math.nan
@@ -248,7 +249,7 @@ def fit_range(R: np.ndarray, t: np.ndarray, centre: np.ndarray, surface: np.ndar
     for step in range(config.steps):
         t_now = c - R @ centre
         u, v, z = visible_samples(R, t_now, surface, K, (w, h), config.cell_px, config.depth_tol_m)
-        observed = _sample(refined, u, v)
+        observed = _sample(refined, u, v, x0, y0)
         residual = observed - fB / z
         ok = (observed > 0.0) & (np.abs(residual) < config.max_residual_px)
         n = int(ok.sum())
