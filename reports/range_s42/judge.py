@@ -25,29 +25,54 @@ _spec.loader.exec_module(_s38)          # session 38's row helpers and definitio
 BUNDLES, _within, _wrong, _far = _s38.BUNDLES, _s38._within, _s38._wrong, _s38._far
 
 
-def collect(runs: Path) -> None:
+def collect_rows(runs: Path, pattern: str, arms: tuple[str, ...], keys: tuple[str, ...],
+                 suffixes: tuple[str, ...] = ("plain", "rest")) -> None:
+    """Each ``pattern.format(arm=..., set=...)`` file of ``runs`` (``shard_eval`` rows), cut to ``keys``, into the
+    same name beside this file. Every round's ``collect`` of this session."""
     from spacepose.tools.shard_eval import write_rows
 
-    keys = (*_s38.KEYS, *KEYS_EXTRA)
-    for b in BUNDLES:
-        for s in ("plain", "rest"):
-            name = f"check_{b}_{s}.json.gz"
+    for arm in arms:
+        for s in suffixes:
+            name = pattern.format(arm=arm, set=s)
             doc = json.loads(gzip.decompress((runs / name).read_bytes()))
             doc["frames"] = [{k: r.get(k) for k in keys if k in r} for r in doc["frames"]]
             doc["cut_to"] = list(keys)
             write_rows(doc, HERE / name)
 
 
+def load_sets(pattern: str, arms: tuple[str, ...], sets: tuple[tuple[str, str], ...]) -> dict[str, dict[str, dict]]:
+    """{set name: {arm: {frame: row}}} of the collected files ``pattern.format(arm=..., set=suffix)`` for ``sets``
+    = ((name, suffix), ...); exits when the arms' rows of a set are not of the same frames."""
+    out: dict = {}
+    for name, s in sets:
+        for arm in arms:
+            rows = json.loads(gzip.decompress((HERE / pattern.format(arm=arm, set=s)).read_bytes()))
+            out.setdefault(name, {})[arm] = {r["frame"]: r for r in rows["frames"]}
+        if len({tuple(sorted(out[name][a])) for a in arms}) != 1:
+            raise SystemExit(f"{name}: the arms' rows are not of the same frames")
+    return out
+
+
+def valid_rows(data: dict, arm: str) -> list[dict]:
+    """The valid rows of ``arm`` over every set of ``data`` (:func:`load_sets`)."""
+    return [r for n in data for r in data[n][arm].values() if r["valid"]]
+
+
+def main(argv: list[str], collect, judge) -> int:
+    """``collect [RUNS]`` (``collect(RUNS)``, default runs/s42) or the judge."""
+    if argv[:1] == ["collect"]:
+        collect(Path(argv[1]) if len(argv) > 1 else RUNS)
+        return 0
+    return judge()
+
+
+def collect(runs: Path) -> None:
+    collect_rows(runs, "check_{arm}_{set}.json.gz", BUNDLES, (*_s38.KEYS, *KEYS_EXTRA))
+
+
 def frame_sets() -> dict[str, dict[str, dict[str, dict]]]:
     """{"F" | "R": {"base" | "cand": {frame: row}}} of the collected rows."""
-    out: dict = {}
-    for name, s in (("F", "plain"), ("R", "rest")):
-        for b in BUNDLES:
-            rows = json.loads(gzip.decompress((HERE / f"check_{b}_{s}.json.gz").read_bytes()))
-            out.setdefault(name, {})[b] = {r["frame"]: r for r in rows["frames"]}
-        if out[name]["base"].keys() != out[name]["cand"].keys():
-            raise SystemExit(f"{name}: base and cand rows are not of the same frames")
-    return out
+    return load_sets("check_{arm}_{set}.json.gz", BUNDLES, (("F", "plain"), ("R", "rest")))
 
 
 def _mean_e_t(data: dict, names: tuple[str, ...], b: str) -> float:
@@ -94,8 +119,4 @@ def judge() -> int:
 
 
 if __name__ == "__main__":
-    argv = sys.argv[1:]
-    if argv[:1] == ["collect"]:
-        collect(Path(argv[1]) if len(argv) > 1 else RUNS)
-    else:
-        raise SystemExit(judge())
+    raise SystemExit(main(sys.argv[1:], collect, judge))

@@ -7,9 +7,7 @@ fit).
 """
 from __future__ import annotations
 
-import gzip
 import importlib.util
-import json
 import sys
 from pathlib import Path
 
@@ -19,39 +17,22 @@ HERE = Path(__file__).resolve().parent
 RUNS = HERE.parent.parent / "runs" / "s42"
 KEYS_EXTRA = ("range_fit_m", "t")
 
-_spec = importlib.util.spec_from_file_location("tone_s38_judge", HERE.parent / "tone_s38" / "judge.py")
-_s38 = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_s38)          # session 38's row helpers and definitions
+_spec = importlib.util.spec_from_file_location("range_s42_judge", HERE / "judge.py")
+_r1 = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_r1)           # round 1's judge: the row helpers of every round, session 38's definitions
+_s38 = _r1._s38
 BUNDLES, _within, _wrong, _far = _s38.BUNDLES, _s38._within, _s38._wrong, _s38._far
 SETS = (("F2", "plain"), ("R2", "rest"))
+PATTERN = "check2_{arm}_{set}.json.gz"
+_valid = _r1.valid_rows
 
 
 def collect(runs: Path) -> None:
-    from spacepose.tools.shard_eval import write_rows
-
-    keys = (*_s38.KEYS, *KEYS_EXTRA)
-    for b in BUNDLES:
-        for _, s in SETS:
-            name = f"check2_{b}_{s}.json.gz"
-            doc = json.loads(gzip.decompress((runs / name).read_bytes()))
-            doc["frames"] = [{k: r.get(k) for k in keys if k in r} for r in doc["frames"]]
-            doc["cut_to"] = list(keys)
-            write_rows(doc, HERE / name)
+    _r1.collect_rows(runs, PATTERN, BUNDLES, (*_s38.KEYS, *KEYS_EXTRA))
 
 
 def frame_sets() -> dict[str, dict[str, dict[str, dict]]]:
-    out: dict = {}
-    for name, s in SETS:
-        for b in BUNDLES:
-            rows = json.loads(gzip.decompress((HERE / f"check2_{b}_{s}.json.gz").read_bytes()))
-            out.setdefault(name, {})[b] = {r["frame"]: r for r in rows["frames"]}
-        if out[name]["base"].keys() != out[name]["cand"].keys():
-            raise SystemExit(f"{name}: base and cand rows are not of the same frames")
-    return out
-
-
-def _valid(data: dict, b: str) -> list[dict]:
-    return [r for n in data for r in data[n][b].values() if r["valid"]]
+    return _r1.load_sets(PATTERN, BUNDLES, SETS)
 
 
 def judge() -> int:
@@ -95,8 +76,4 @@ def judge() -> int:
 
 
 if __name__ == "__main__":
-    argv = sys.argv[1:]
-    if argv[:1] == ["collect"]:
-        collect(Path(argv[1]) if len(argv) > 1 else RUNS)
-    else:
-        raise SystemExit(judge())
+    raise SystemExit(_r1.main(sys.argv[1:], collect, judge))

@@ -6,9 +6,7 @@ bundle; conf: the refitted constants with the floor 0.22; pos: the range fit for
 """
 from __future__ import annotations
 
-import gzip
 import importlib.util
-import json
 import sys
 from pathlib import Path
 
@@ -20,42 +18,25 @@ ARMS = ("base", "conf", "pos", "both")
 SETS = (("F3", "plain"), ("R3", "rest"))
 KEYS_EXTRA = ("range_fit_m", "t", "e_pos_los", "position")
 
-_spec = importlib.util.spec_from_file_location("tone_s38_judge", HERE.parent / "tone_s38" / "judge.py")
-_s38 = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_s38)          # session 38's row helpers and definitions
+_spec = importlib.util.spec_from_file_location("range_s42_judge", HERE / "judge.py")
+_r1 = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_r1)           # round 1's judge: the row helpers of every round, session 38's definitions
+_s38 = _r1._s38
 _within, _wrong, _far = _s38._within, _s38._wrong, _s38._far
+PATTERN = "check3_{arm}_{set}.json.gz"
+_valid = _r1.valid_rows
 
 
 def collect(runs: Path) -> None:
-    from spacepose.tools.shard_eval import write_rows
-
-    keys = (*_s38.KEYS, *KEYS_EXTRA)
-    for arm in ARMS:
-        for _, s in SETS:
-            name = f"check3_{arm}_{s}.json.gz"
-            doc = json.loads(gzip.decompress((runs / name).read_bytes()))
-            doc["frames"] = [{k: r.get(k) for k in keys if k in r} for r in doc["frames"]]
-            doc["cut_to"] = list(keys)
-            write_rows(doc, HERE / name)
+    _r1.collect_rows(runs, PATTERN, ARMS, (*_s38.KEYS, *KEYS_EXTRA))
 
 
 def frame_sets() -> dict[str, dict[str, dict[str, dict]]]:
-    out: dict = {}
-    for name, s in SETS:
-        for arm in ARMS:
-            rows = json.loads(gzip.decompress((HERE / f"check3_{arm}_{s}.json.gz").read_bytes()))
-            out.setdefault(name, {})[arm] = {r["frame"]: r for r in rows["frames"]}
-        if len({tuple(sorted(out[name][a])) for a in ARMS}) != 1:
-            raise SystemExit(f"{name}: the arms' rows are not of the same frames")
-    return out
+    return _r1.load_sets(PATTERN, ARMS, SETS)
 
 
 def _pair(data: dict, base: str, cand: str) -> dict:
     return {n: {"base": by[base], "cand": by[cand]} for n, by in data.items()}
-
-
-def _valid(data: dict, b: str) -> list[dict]:
-    return [r for n in data for r in data[n][b].values() if r["valid"]]
 
 
 def part_a(data: dict) -> dict[str, bool]:
@@ -144,8 +125,4 @@ def judge() -> int:
 
 
 if __name__ == "__main__":
-    argv = sys.argv[1:]
-    if argv[:1] == ["collect"]:
-        collect(Path(argv[1]) if len(argv) > 1 else RUNS)
-    else:
-        raise SystemExit(judge())
+    raise SystemExit(_r1.main(sys.argv[1:], collect, judge))

@@ -20,19 +20,14 @@ RUNS = HERE.parent.parent / "runs" / "s42"
 KEYS = ("frame", "valid", "position_valid", "position", "depth_tolerance_m", "e_pos", "e_pos_los",
         "outline_chamfer_px", "e_R", "e_t", "confidence")
 
-_spec = importlib.util.spec_from_file_location("tone_s38_judge", HERE.parent / "tone_s38" / "judge.py")
-_s38 = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_s38)          # session 38's verdict print
+_spec = importlib.util.spec_from_file_location("range_s42_judge", HERE / "judge.py")
+_r1 = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_r1)           # round 1's judge: the row helpers of every round, session 38's definitions
+_s38 = _r1._s38
 
 
 def collect(runs: Path) -> None:
-    from spacepose.tools.shard_eval import write_rows
-
-    for s in ("plain", "rest"):
-        doc = json.loads(gzip.decompress((runs / f"check4_{s}.json.gz").read_bytes()))
-        doc["frames"] = [{k: r.get(k) for k in KEYS if k in r} for r in doc["frames"]]
-        doc["cut_to"] = list(KEYS)
-        write_rows(doc, HERE / f"check4_{s}.json.gz")
+    _r1.collect_rows(runs, "check4_{set}.json.gz", ("",), KEYS)
 
 
 def judge() -> int:
@@ -66,8 +61,4 @@ def judge() -> int:
 
 
 if __name__ == "__main__":
-    argv = sys.argv[1:]
-    if argv[:1] == ["collect"]:
-        collect(Path(argv[1]) if len(argv) > 1 else RUNS)
-    else:
-        raise SystemExit(judge())
+    raise SystemExit(_r1.main(sys.argv[1:], collect, judge))
