@@ -4,8 +4,9 @@
     python reports/range_s42/judge4.py                  # the clauses and the verdict
 
 One evaluation per set with the shipped bundle; the covariance of each frame with a position but no pose is
-recomputed from its position, depth tolerance and chamfer for the shipped constants (base) and the candidate's
-(``fit4_positions.json``, rounded to 4 decimals), by ``spacepose.tools.calibrate_uncertainty.position_coverage``.
+recomputed from its position, depth tolerance and chamfer for the constants shipped before round 4 (base,
+:data:`BASE_CONSTANTS`) and the candidate's (``fit4_positions.json``, rounded to 4 decimals), by
+``spacepose.tools.calibrate_uncertainty.position_coverage``.
 """
 from __future__ import annotations
 
@@ -25,13 +26,18 @@ _r1 = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_r1)           # round 1's judge: the row helpers of every round, session 38's definitions
 _s38 = _r1._s38
 
+#: the default bundle's position_uncertainty when plan4.txt was written (its "shipped" constants)
+BASE_CONSTANTS = {"range_k": 0.2487, "range_chamfer_k": 0.1189, "lateral_px": 0.0, "lateral_floor_m": 0.0,
+                  "lateral_chamfer_m": 0.0337}
+
 
 def collect(runs: Path) -> None:
     _r1.collect_rows(runs, "check4_{set}.json.gz", ("",), KEYS)
 
 
 def judge() -> int:
-    from spacepose.bundle import load_bundle
+    """plan4.txt's clauses; ``base`` is the section as shipped when plan4.txt was written (:data:`BASE_CONSTANTS`),
+    not the default bundle's, which holds the candidate since round 4 was met."""
     from spacepose.tools.calibrate_uncertainty import format_position_coverage, position_coverage, position_errors
     from spacepose.uncertainty import PositionUncertaintyConfig
 
@@ -40,7 +46,7 @@ def judge() -> int:
     focal = float(docs[0]["focal_px"])
     err = position_errors(rows, focal)
     fit = json.loads((HERE / "fit4_positions.json").read_text())["fit"]
-    configs = {"base": load_bundle(None, verify_graphs=False).position_uncertainty,
+    configs = {"base": PositionUncertaintyConfig(**BASE_CONSTANTS),
                "cand": PositionUncertaintyConfig(**{k: round(float(v), 4) for k, v in fit.items()})}
     cov = {}
     for name, config in configs.items():
