@@ -1,8 +1,8 @@
 """The range of a decided pose from the stereo pair at full resolution, given its rotation (session 42).
 
 The stereo graph runs on a 256x256 crop, and its disparity over the target carries a per-frame bias: on spent
-frames (``reports/range_s42``) the median error over the target's interior had a spread of 0.26 px at 640x480,
-which is 0.1 m of range at 30 m. The range of a valid pose followed it: the polish weighs the stereo points' range
+frames (``reports/range_s42``) its mean error on the target's pixels had a spread of 0.23 px at 640x480, which
+is 0.1 m of range at 30 m. The range of a valid pose followed it: the polish weighs the stereo points' range
 against the outline's, and neither removes that bias. Step 2 below alone, on the rendered disparity, leaves 0.03 m.
 
 This module measures the range again from the images. With the bundle's optional ``range_fit`` section

@@ -194,6 +194,10 @@ def table(paths: list[str]) -> None:
     dd = np.array([r["dd_pose"] for r in rows])
     nb = np.array([r["net_bias_pix"] if r["net_bias_pix"] is not None else np.nan for r in rows])
     print(f"{len(rows)} valid poses with pixels; pose range error in disparity: std {dd.std():.3f}")
+    e_t = np.array([r["e_t"] for r in rows])
+    rng = np.abs([r["range_err"] for r in rows])
+    print(f"their mean e_t {e_t.mean():.3f} m, of which along the line of sight: mean |range error| {rng.mean():.3f} m; "
+          f"mean disparity error on the target's pixels: spread over the frames {np.nanstd(nb):.3f} px")
     print(f"corr(dd_pose, net bias on target pixels) {np.corrcoef(dd[np.isfinite(nb)], nb[np.isfinite(nb)])[0, 1]:.3f}")
     for k in rows[0]["offsets"]:
         off = np.array([r["offsets"][k] for r in rows])

@@ -114,6 +114,13 @@ def judge() -> int:
     n_valid = v["cand"]
     print(f"the fit applied on {len(moves)} of {n_valid} valid cand poses; |move| median {np.median(np.abs(moves)):.3f} "
           f"m, 95th percentile {np.percentile(np.abs(moves), 95):.3f} m, largest {np.max(np.abs(moves)):.3f} m")
+    for n, by in data.items():     # the wrong poses of either bundle, frame by frame
+        for k in sorted(by["base"]):
+            rb, rc = by["base"][k], by["cand"][k]
+            if _wrong(rb) or _wrong(rc):
+                print(f"    wrong in {'both' if _wrong(rb) and _wrong(rc) else 'base' if _wrong(rb) else 'cand'}: "
+                      f"{n} {k} at {rb['distance']:.1f} m: base e_t {rb['e_t']:.3f} m / e_R {rb['e_R']:.2f} deg, "
+                      f"cand e_t {rc['e_t']:.3f} m (moved {rc['range_fit_m']:+.3f} m)")
     _s38.print_verdict(clauses, "MET: the range fit ships")
     return 0
 
